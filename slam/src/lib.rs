@@ -1,1 +1,43 @@
-//! placeholder
+//! # scarp-slam
+//!
+//! The geometry core and mapping engine of scarp: pinhole cameras, rigid transforms, RGBD frames,
+//! image pyramids, triangle meshes and point clouds. Later stages (odometry, TSDF fusion,
+//! marching cubes, features, bundle adjustment) build on these types.
+//!
+//! Conventions, which every public item follows:
+//! - World is local ENU (x east, y north, z up), in metres.
+//! - Camera is OpenCV (x right, y down, z forward); pixel (u, v) is (column, row) and pixel
+//!   centres sit at integer coordinates.
+//! - Transforms are named by what they map: `world_from_camera` takes camera coordinates to world
+//!   coordinates.
+//! - Depth is f32 metres along the camera z axis; 0.0 means "no measurement".
+//!
+//! ```
+//! use nalgebra::{Point3, Vector3};
+//! use scarp_slam::geometry::{PinholeCamera, look_at};
+//!
+//! // A 640×480 camera with an 80° horizontal field of view.
+//! let camera = PinholeCamera::from_hfov(640, 480, 80.0).unwrap();
+//! // A camera 5 m east of the origin, looking at it.
+//! let world_from_camera = look_at(
+//!     &Point3::new(5.0, 0.0, 0.0),
+//!     &Point3::origin(),
+//!     &Vector3::z(),
+//! ).unwrap();
+//! let p_camera = world_from_camera.inverse() * Point3::origin();
+//! let pixel = camera.project(&p_camera).unwrap();
+//! assert!((pixel.x - camera.cx).abs() < 1e-9 && (pixel.y - camera.cy).abs() < 1e-9);
+//! ```
+
+pub mod error;
+pub mod frame;
+pub mod geometry;
+pub mod image;
+pub mod mesh;
+pub mod point_cloud;
+
+pub use error::SlamError;
+pub use frame::RgbdFrame;
+pub use geometry::PinholeCamera;
+pub use mesh::TriangleMesh;
+pub use point_cloud::PointCloud;

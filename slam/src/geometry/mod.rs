@@ -1,0 +1,10 @@
+//! Cameras and rigid transforms.
+
+mod camera;
+mod transform;
+
+pub use camera::PinholeCamera;
+pub use transform::{
+    check_finite_isometry, isometry_from_tum, look_at, quaternion_from_xyzw, rotation_angle_deg,
+    tum_from_isometry, yaw_pitch_roll_from_rotation,
+};
