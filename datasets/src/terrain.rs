@@ -139,7 +139,7 @@ impl Heightfield {
             (gy.floor() as usize).min(self.ny.saturating_sub(2)),
         );
         let (fx, fy) = (gx - i as f64, gy - j as f64);
-        let h = |di, dj| f64::from(self.sample((i + di).min(self.nx - 1), (j + dj).min(self.ny - 1)));
+        let h = |di: usize, dj: usize| f64::from(self.sample((i + di).min(self.nx - 1), (j + dj).min(self.ny - 1)));
         let south = h(0, 0) + (h(1, 0) - h(0, 0)) * fx;
         let north = h(0, 1) + (h(1, 1) - h(0, 1)) * fx;
         Some(south + (north - south) * fy)
