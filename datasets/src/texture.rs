@@ -36,13 +36,34 @@ fn smoothstep(lo: f32, hi: f32, x: f32) -> f32 {
 pub fn terrain_albedo(config: &TextureConfig, x_m: f64, y_m: f64) -> [u8; 3] {
     let seed = config.seed;
     let patches = fbm_2d(derive_seed(seed, 1), x_m, y_m, 8.0, 4);
-    let base = mix(config.terrain_color, config.terrain_patch_color, smoothstep(0.05, 0.45, patches));
-    let variation = fbm_2d(derive_seed(seed, 2), x_m, y_m, config.variation_wavelength_m * 4.0, 3);
+    let base = mix(
+        config.terrain_color,
+        config.terrain_patch_color,
+        smoothstep(0.05, 0.45, patches),
+    );
+    let variation = fbm_2d(
+        derive_seed(seed, 2),
+        x_m,
+        y_m,
+        config.variation_wavelength_m * 4.0,
+        3,
+    );
     // Pebbles: thresholded cellular-scale noise gives crisp blobs (good corners).
     let pebble = value_noise_2d(derive_seed(seed, 3), x_m / 0.12, y_m / 0.12);
-    let pebble_shade = if pebble > 0.6 { 0.55 } else if pebble < -0.7 { 1.25 } else { 1.0 };
-    let grain = value_noise_2d(derive_seed(seed, 4), x_m / config.speckle_wavelength_m, y_m / config.speckle_wavelength_m);
-    let shade = (1.0 + 0.25 * variation) * pebble_shade * (1.0 + config.speckle as f32 * 0.5 * grain);
+    let pebble_shade = if pebble > 0.6 {
+        0.55
+    } else if pebble < -0.7 {
+        1.25
+    } else {
+        1.0
+    };
+    let grain = value_noise_2d(
+        derive_seed(seed, 4),
+        x_m / config.speckle_wavelength_m,
+        y_m / config.speckle_wavelength_m,
+    );
+    let shade =
+        (1.0 + 0.25 * variation) * pebble_shade * (1.0 + config.speckle as f32 * 0.5 * grain);
     scale_color(base, shade)
 }
 
@@ -53,7 +74,13 @@ pub fn rock_albedo(config: &TextureConfig, base: [u8; 3], x_m: f64, y_m: f64, z_
     let coarse = fbm_3d(seed, x_m, y_m, z_m, config.variation_wavelength_m, 2);
     let s = config.speckle_wavelength_m;
     let grain = value_noise_3d(derive_seed(seed, 1), x_m / s, y_m / s, z_m / s);
-    let crystal = if grain > 0.55 { 0.45 } else if grain < -0.6 { 1.3 } else { 1.0 };
+    let crystal = if grain > 0.55 {
+        0.45
+    } else if grain < -0.6 {
+        1.3
+    } else {
+        1.0
+    };
     let shade = (1.0 + 0.3 * coarse) * (1.0 + (crystal - 1.0) * config.speckle as f32 * 2.0);
     scale_color(base.map(f32::from), shade)
 }
@@ -69,17 +96,29 @@ impl AlbedoMap {
         let texels = (0..ny)
             .into_par_iter()
             .flat_map_iter(|j| {
-                (0..nx).map(move |i| terrain_albedo(config, x0 + i as f64 * texel_m, y0 + j as f64 * texel_m))
+                (0..nx).map(move |i| {
+                    terrain_albedo(config, x0 + i as f64 * texel_m, y0 + j as f64 * texel_m)
+                })
             })
             .collect();
-        Self { origin_x_m: x0, origin_y_m: y0, texel_m, nx, ny, texels }
+        Self {
+            origin_x_m: x0,
+            origin_y_m: y0,
+            texel_m,
+            nx,
+            ny,
+            texels,
+        }
     }
 
     /// Bilinear albedo at (x, y), clamped to the map's edge.
     pub fn sample(&self, x_m: f64, y_m: f64) -> [f32; 3] {
         let gx = ((x_m - self.origin_x_m) / self.texel_m).clamp(0.0, (self.nx - 1) as f64);
         let gy = ((y_m - self.origin_y_m) / self.texel_m).clamp(0.0, (self.ny - 1) as f64);
-        let (i, j) = ((gx as usize).min(self.nx - 2), (gy as usize).min(self.ny - 2));
+        let (i, j) = (
+            (gx as usize).min(self.nx - 2),
+            (gy as usize).min(self.ny - 2),
+        );
         let (fx, fy) = ((gx - i as f64) as f32, (gy - j as f64) as f32);
         let t = |di: usize, dj: usize| self.texels[(j + dj) * self.nx + i + di];
         let (a, b, c, d) = (t(0, 0), t(1, 0), t(0, 1), t(1, 1));

@@ -62,7 +62,10 @@ pub struct Renderer<'w> {
     layers: Vec<Layer<'w>>,
 }
 
-fn chunk_faces(mesh: &TriangleMesh, cell_m: f64) -> (Vec<[u32; 3]>, Vec<(usize, usize, Point3<f64>, Point3<f64>)>) {
+fn chunk_faces(
+    mesh: &TriangleMesh,
+    cell_m: f64,
+) -> (Vec<[u32; 3]>, Vec<(usize, usize, Point3<f64>, Point3<f64>)>) {
     let centroid = |f: &[u32; 3]| -> Point3<f64> {
         let p = f.map(|i| mesh.positions[i as usize].coords.cast::<f64>());
         Point3::from((p[0] + p[1] + p[2]) / 3.0)
@@ -79,7 +82,10 @@ fn chunk_faces(mesh: &TriangleMesh, cell_m: f64) -> (Vec<[u32; 3]>, Vec<(usize, 
     while start < faces.len() {
         let k = key(&faces[start]);
         let mut end = start;
-        let (mut lo, mut hi) = (Point3::from([f64::INFINITY; 3]), Point3::from([f64::NEG_INFINITY; 3]));
+        let (mut lo, mut hi) = (
+            Point3::from([f64::INFINITY; 3]),
+            Point3::from([f64::NEG_INFINITY; 3]),
+        );
         while end < faces.len() && key(&faces[end]) == k {
             for &v in &faces[end] {
                 let p = mesh.positions[v as usize].cast::<f64>();
@@ -99,15 +105,37 @@ impl<'w> Renderer<'w> {
     pub fn new(world: &'w World) -> Self {
         let texture = &world.config.texture;
         let mut layers = Vec::new();
-        let mut add = |mesh: &'w TriangleMesh, instance_id: u16, material: Material, cell_m: f64| {
-            let (faces, chunks) = chunk_faces(mesh, cell_m);
-            layers.push(Layer { mesh, instance_id, material, faces, chunks });
-        };
-        add(&world.terrain_mesh, TERRAIN_INSTANCE_ID, Material::Terrain, 4.0);
+        let mut add =
+            |mesh: &'w TriangleMesh, instance_id: u16, material: Material, cell_m: f64| {
+                let (faces, chunks) = chunk_faces(mesh, cell_m);
+                layers.push(Layer {
+                    mesh,
+                    instance_id,
+                    material,
+                    faces,
+                    chunks,
+                });
+            };
+        add(
+            &world.terrain_mesh,
+            TERRAIN_INSTANCE_ID,
+            Material::Terrain,
+            4.0,
+        );
         for rock in &world.rocks {
-            add(&rock.mesh, rock.id as u16, Material::Solid(texture.rock_color), 0.5);
+            add(
+                &rock.mesh,
+                rock.id as u16,
+                Material::Solid(texture.rock_color),
+                0.5,
+            );
             if let Some(p) = &rock.pedestal {
-                add(p, PEDESTAL_INSTANCE_OFFSET + rock.id as u16, Material::Solid(texture.pedestal_color), 0.5);
+                add(
+                    p,
+                    PEDESTAL_INSTANCE_OFFSET + rock.id as u16,
+                    Material::Solid(texture.pedestal_color),
+                    0.5,
+                );
             }
         }
         Self { world, layers }
@@ -117,16 +145,32 @@ impl<'w> Renderer<'w> {
     ///
     /// # Errors
     /// [`DatasetError::Geometry`] for invalid intrinsics or a non-finite pose.
-    pub fn render(&self, camera: &PinholeCamera, world_from_camera: &Isometry3<f64>) -> Result<RenderOutput, DatasetError> {
+    pub fn render(
+        &self,
+        camera: &PinholeCamera,
+        world_from_camera: &Isometry3<f64>,
+    ) -> Result<RenderOutput, DatasetError> {
         camera.validate()?;
         scarp_slam::geometry::check_finite_isometry(world_from_camera, "world_from_camera")?;
         let camera_from_world = world_from_camera.inverse();
         let triangles = self.setup(camera, &camera_from_world);
         let (winners, inv_depth) = self.rasterize(camera, &triangles);
-        Ok(self.resolve(camera, world_from_camera, &camera_from_world, &triangles, &winners, &inv_depth))
+        Ok(self.resolve(
+            camera,
+            world_from_camera,
+            &camera_from_world,
+            &triangles,
+            &winners,
+            &inv_depth,
+        ))
     }
 
-    fn chunk_visible(camera: &PinholeCamera, camera_from_world: &Isometry3<f64>, lo: &Point3<f64>, hi: &Point3<f64>) -> bool {
+    fn chunk_visible(
+        camera: &PinholeCamera,
+        camera_from_world: &Isometry3<f64>,
+        lo: &Point3<f64>,
+        hi: &Point3<f64>,
+    ) -> bool {
         let corners: Vec<Point3<f64>> = (0..8)
             .map(|i| {
                 camera_from_world
@@ -146,10 +190,16 @@ impl<'w> Renderer<'w> {
             &|p| camera.fy * p.y + (camera.cy + 0.5) * p.z,
             &|p| (h - 0.5 - camera.cy) * p.z - camera.fy * p.y,
         ];
-        planes.iter().all(|plane| corners.iter().any(|c| plane(c) >= 0.0))
+        planes
+            .iter()
+            .all(|plane| corners.iter().any(|c| plane(c) >= 0.0))
     }
 
-    fn setup(&self, camera: &PinholeCamera, camera_from_world: &Isometry3<f64>) -> Vec<SetupTriangle> {
+    fn setup(
+        &self,
+        camera: &PinholeCamera,
+        camera_from_world: &Isometry3<f64>,
+    ) -> Vec<SetupTriangle> {
         let jobs: Vec<(usize, usize)> = self
             .layers
             .iter()
@@ -159,7 +209,9 @@ impl<'w> Renderer<'w> {
                     .chunks
                     .iter()
                     .enumerate()
-                    .filter(|(_, (_, _, lo, hi))| Self::chunk_visible(camera, camera_from_world, lo, hi))
+                    .filter(|(_, (_, _, lo, hi))| {
+                        Self::chunk_visible(camera, camera_from_world, lo, hi)
+                    })
                     .map(move |(c, _)| (l, c))
             })
             .collect();
@@ -170,8 +222,17 @@ impl<'w> Renderer<'w> {
                 let (start, end, _, _) = layer.chunks[c];
                 let mut out = Vec::new();
                 for (f, face) in layer.faces[start..end].iter().enumerate() {
-                    let corners = face.map(|v| camera_from_world * layer.mesh.positions[v as usize].cast::<f64>());
-                    setup_triangle(camera, &corners, l as u16, (start + f) as u32, NEAR_PLANE_M, &mut out);
+                    let corners = face.map(|v| {
+                        camera_from_world * layer.mesh.positions[v as usize].cast::<f64>()
+                    });
+                    setup_triangle(
+                        camera,
+                        &corners,
+                        l as u16,
+                        (start + f) as u32,
+                        NEAR_PLANE_M,
+                        &mut out,
+                    );
                 }
                 out
             })
@@ -179,7 +240,11 @@ impl<'w> Renderer<'w> {
         per_chunk.concat()
     }
 
-    fn rasterize(&self, camera: &PinholeCamera, triangles: &[SetupTriangle]) -> (Vec<u32>, Vec<f32>) {
+    fn rasterize(
+        &self,
+        camera: &PinholeCamera,
+        triangles: &[SetupTriangle],
+    ) -> (Vec<u32>, Vec<f32>) {
         let tiles_x = camera.width.div_ceil(TILE_SIZE) as usize;
         let tiles_y = camera.height.div_ceil(TILE_SIZE) as usize;
         let mut bins: Vec<Vec<u32>> = vec![Vec::new(); tiles_x * tiles_y];
@@ -203,7 +268,10 @@ impl<'w> Renderer<'w> {
         let (mut winners, mut inv_depth) = (vec![u32::MAX; n], vec![0.0f32; n]);
         let width = camera.width as usize;
         for (i, tile) in tiles.iter().enumerate() {
-            let (x0, y0) = ((i % tiles_x) * TILE_SIZE as usize, (i / tiles_x) * TILE_SIZE as usize);
+            let (x0, y0) = (
+                (i % tiles_x) * TILE_SIZE as usize,
+                (i / tiles_x) * TILE_SIZE as usize,
+            );
             let tw = (width - x0).min(TILE_SIZE as usize);
             let th = (camera.height as usize - y0).min(TILE_SIZE as usize);
             for row in 0..th {
@@ -236,16 +304,27 @@ impl<'w> Renderer<'w> {
             .map(|i| {
                 let (u, v) = ((i % width) as f64, (i / width) as f64);
                 let winner = winners[i];
-                let ray = Vector3::new((u - camera.cx) / camera.fx, (v - camera.cy) / camera.fy, 1.0);
+                let ray = Vector3::new(
+                    (u - camera.cx) / camera.fx,
+                    (v - camera.cy) / camera.fy,
+                    1.0,
+                );
                 if winner == u32::MAX {
                     // Sky: brighter toward the horizon.
-                    let up = (world_from_camera.rotation * ray.normalize()).z.clamp(0.0, 1.0) as f32;
-                    return ([(190.0 - 70.0 * up) as u8, (210.0 - 50.0 * up) as u8, 235], 0.0, 0);
+                    let up = (world_from_camera.rotation * ray.normalize())
+                        .z
+                        .clamp(0.0, 1.0) as f32;
+                    return (
+                        [(190.0 - 70.0 * up) as u8, (210.0 - 50.0 * up) as u8, 235],
+                        0.0,
+                        0,
+                    );
                 }
                 let t = &triangles[winner as usize];
                 let layer = &self.layers[t.layer as usize];
                 let face = layer.faces[t.face as usize];
-                let [a, b, c] = face.map(|k| camera_from_world * layer.mesh.positions[k as usize].cast::<f64>());
+                let [a, b, c] = face
+                    .map(|k| camera_from_world * layer.mesh.positions[k as usize].cast::<f64>());
                 let normal = (b - a).cross(&(c - a));
                 let denominator = normal.dot(&ray);
                 let depth = if denominator.abs() > 1e-12 {
@@ -268,7 +347,9 @@ impl<'w> Renderer<'w> {
                 let p_world = world_from_camera * p;
                 let albedo = match layer.material {
                     Material::Terrain => world.terrain_albedo.sample(p_world.x, p_world.y),
-                    Material::Solid(base) => rock_albedo(texture, base, p_world.x, p_world.y, p_world.z).map(f32::from),
+                    Material::Solid(base) => {
+                        rock_albedo(texture, base, p_world.x, p_world.y, p_world.z).map(f32::from)
+                    }
                 };
                 let lambert = shading_normal.dot(&sun).max(0.0) as f32;
                 let light = ambient + (1.0 - ambient) * lambert;

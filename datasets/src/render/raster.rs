@@ -56,7 +56,12 @@ pub fn setup_triangle(
     }
     for k in 1..polygon.len() - 1 {
         let tri = [polygon[0], polygon[k], polygon[k + 1]];
-        let mut screen = tri.map(|p| [camera.fx * p.x / p.z + camera.cx, camera.fy * p.y / p.z + camera.cy]);
+        let mut screen = tri.map(|p| {
+            [
+                camera.fx * p.x / p.z + camera.cx,
+                camera.fy * p.y / p.z + camera.cy,
+            ]
+        });
         let mut inv_z = tri.map(|p| 1.0 / p.z);
         let area = edge(&screen[0], &screen[1], &screen[2]);
         if !(area.abs() > 1e-12) {
@@ -86,7 +91,10 @@ pub fn setup_triangle(
 }
 
 fn min_max(values: [f64; 3]) -> (f64, f64) {
-    (values[0].min(values[1]).min(values[2]), values[0].max(values[1]).max(values[2]))
+    (
+        values[0].min(values[1]).min(values[2]),
+        values[0].max(values[1]).max(values[2]),
+    )
 }
 
 /// Edge function of p against the directed edge a→b; positive on the interior side of a
@@ -126,7 +134,11 @@ pub fn rasterize_tile(
         if u_lo > u_hi || v_lo > v_hi {
             continue;
         }
-        let edges = [(s1, s2, is_top_left(s1, s2)), (s2, s0, is_top_left(s2, s0)), (s0, s1, is_top_left(s0, s1))];
+        let edges = [
+            (s1, s2, is_top_left(s1, s2)),
+            (s2, s0, is_top_left(s2, s0)),
+            (s0, s1, is_top_left(s0, s1)),
+        ];
         let inv_area = 1.0 / area;
         for v in v_lo..=v_hi {
             for u in u_lo..=u_hi {
@@ -144,7 +156,8 @@ pub fn rasterize_tile(
                 if !covered {
                     continue;
                 }
-                let iz = ((w[0] * t.inv_z[0] + w[1] * t.inv_z[1] + w[2] * t.inv_z[2]) * inv_area) as f32;
+                let iz =
+                    ((w[0] * t.inv_z[0] + w[1] * t.inv_z[1] + w[2] * t.inv_z[2]) * inv_area) as f32;
                 let slot = ((v - y0) * TILE_SIZE + (u - x0)) as usize;
                 if iz > inv_depth[slot] {
                     inv_depth[slot] = iz;

@@ -96,7 +96,11 @@ impl World {
     /// # Errors
     /// Only if the built-in description were broken; a test guards it.
     pub fn builtin_default() -> Result<Self, DatasetError> {
-        Self::from_toml_str(DEFAULT_WORLD_TOML, Path::new("<built-in default world>"), Path::new("."))
+        Self::from_toml_str(
+            DEFAULT_WORLD_TOML,
+            Path::new("<built-in default world>"),
+            Path::new("."),
+        )
     }
 
     /// `default` for the built-in world, otherwise a world file path.
@@ -118,7 +122,10 @@ impl World {
     /// names the key and line), and the errors of [`Self::build`].
     pub fn load(path: &Path) -> Result<Self, DatasetError> {
         let text = std::fs::read_to_string(path).map_err(|e| DatasetError::io(path, e))?;
-        let base = path.parent().map(Path::to_path_buf).unwrap_or_else(|| PathBuf::from("."));
+        let base = path
+            .parent()
+            .map(Path::to_path_buf)
+            .unwrap_or_else(|| PathBuf::from("."));
         Self::from_toml_str(&text, path, &base)
     }
 
@@ -158,13 +165,23 @@ impl World {
         for (index, rock) in config.rocks.iter().enumerate() {
             let key = format!("rocks[{index}]");
             if !(1..=999).contains(&rock.id) || !ids.insert(rock.id) {
-                return Err(DatasetError::invalid(format!("{key}.id"), format!("id {} must be unique and in 1..=999", rock.id)));
+                return Err(DatasetError::invalid(
+                    format!("{key}.id"),
+                    format!("id {} must be unique and in 1..=999", rock.id),
+                ));
             }
             rocks.push(place_rock(rock, &key, &heightfield, base_dir)?);
         }
         let terrain_albedo = AlbedoMap::bake(&config.texture, &heightfield);
         terrain_mesh.colors.clear();
-        Ok(Self { config, heightfield, terrain_mesh, rocks, sun_direction, terrain_albedo })
+        Ok(Self {
+            config,
+            heightfield,
+            terrain_mesh,
+            rocks,
+            sun_direction,
+            terrain_albedo,
+        })
     }
 
     /// The rock with this id.
@@ -196,20 +213,34 @@ impl World {
                 height_m: r.height_m,
                 volume_m3: r.volume_m3,
                 mesh: format!("rock_{}.ply", r.id),
-                pedestal_mesh: r.pedestal.as_ref().map(|_| format!("pedestal_{}.ply", r.id)),
+                pedestal_mesh: r
+                    .pedestal
+                    .as_ref()
+                    .map(|_| format!("pedestal_{}.ply", r.id)),
                 contact: r.contact.clone(),
             })
             .collect()
     }
 }
 
-fn place_rock(rock: &RockConfig, key: &str, heightfield: &Heightfield, base_dir: &Path) -> Result<Rock, DatasetError> {
+fn place_rock(
+    rock: &RockConfig,
+    key: &str,
+    heightfield: &Heightfield,
+    base_dir: &Path,
+) -> Result<Rock, DatasetError> {
     let [x, y] = rock.position_m;
     let ground_z = heightfield.height_at(x, y).ok_or_else(|| {
-        DatasetError::invalid(format!("{key}.position_m"), format!("({x}, {y}) lies outside the terrain"))
+        DatasetError::invalid(
+            format!("{key}.position_m"),
+            format!("({x}, {y}) lies outside the terrain"),
+        )
     })?;
     if !(rock.height_m > 0.0 && rock.height_m.is_finite()) {
-        return Err(DatasetError::invalid(format!("{key}.height_m"), "must be positive"));
+        return Err(DatasetError::invalid(
+            format!("{key}.height_m"),
+            "must be positive",
+        ));
     }
     let mut mesh = match &rock.shape {
         RockShape::Mesh(source) => load_mesh(source, base_dir)?,
@@ -222,7 +253,10 @@ fn place_rock(rock: &RockConfig, key: &str, heightfield: &Heightfield, base_dir:
         .ok_or_else(|| DatasetError::invalid(format!("{key}.shape"), "the mesh has no vertices"))?;
     let native_height = f64::from(hi.z - lo.z);
     if native_height <= 0.0 {
-        return Err(DatasetError::invalid(format!("{key}.shape"), "the mesh is flat"));
+        return Err(DatasetError::invalid(
+            format!("{key}.shape"),
+            "the mesh is flat",
+        ));
     }
     mesh.scale((rock.height_m / native_height) as f32);
     mesh.transform(&Isometry3::from_parts(
@@ -235,7 +269,10 @@ fn place_rock(rock: &RockConfig, key: &str, heightfield: &Heightfield, base_dir:
             if rock.contact_radius_m >= pedestal.top_radius_m {
                 return Err(DatasetError::invalid(
                     format!("{key}.contact_radius_m"),
-                    format!("{} m must be smaller than the pedestal's top radius {} m", rock.contact_radius_m, pedestal.top_radius_m),
+                    format!(
+                        "{} m must be smaller than the pedestal's top radius {} m",
+                        rock.contact_radius_m, pedestal.top_radius_m
+                    ),
                 ));
             }
             let (seated, contact) = seat_on_flat_contact(mesh, rock.contact_radius_m, key)?;
@@ -245,7 +282,9 @@ fn place_rock(rock: &RockConfig, key: &str, heightfield: &Heightfield, base_dir:
                 .map(|k| {
                     let a = f64::from(k) / 16.0 * std::f64::consts::TAU;
                     let r = pedestal.base_radius_m;
-                    heightfield.height_at(x + r * a.cos(), y + r * a.sin()).unwrap_or(ground_z)
+                    heightfield
+                        .height_at(x + r * a.cos(), y + r * a.sin())
+                        .unwrap_or(ground_z)
                 })
                 .fold(ground_z, f64::min);
             let pedestal_mesh = pedestal.mesh([x, y], foot_z, top_z, u64::from(rock.id));
@@ -253,13 +292,19 @@ fn place_rock(rock: &RockConfig, key: &str, heightfield: &Heightfield, base_dir:
             seated.transform(&Isometry3::translation(x, y, top_z));
             let contact = Contact {
                 height_m: top_z,
-                polygon_xy_m: contact.polygon_xy_m.iter().map(|p| [p[0] + x, p[1] + y]).collect(),
+                polygon_xy_m: contact
+                    .polygon_xy_m
+                    .iter()
+                    .map(|p| [p[0] + x, p[1] + y])
+                    .collect(),
                 area_m2: contact.area_m2,
             };
             (seated, Some(pedestal_mesh), Some(contact))
         }
         None => {
-            let (lo, hi) = mesh.bounds().ok_or_else(|| DatasetError::invalid(key, "empty mesh"))?;
+            let (lo, hi) = mesh
+                .bounds()
+                .ok_or_else(|| DatasetError::invalid(key, "empty mesh"))?;
             let centre = nalgebra::center(&lo, &hi);
             let sink = rock.embed_fraction * rock.height_m;
             mesh.transform(&Isometry3::translation(
@@ -278,7 +323,9 @@ fn place_rock(rock: &RockConfig, key: &str, heightfield: &Heightfield, base_dir:
         ));
     }
     mesh.compute_vertex_normals();
-    let (lo, hi) = mesh.bounds().ok_or_else(|| DatasetError::invalid(key, "empty mesh"))?;
+    let (lo, hi) = mesh
+        .bounds()
+        .ok_or_else(|| DatasetError::invalid(key, "empty mesh"))?;
     let mut pedestal = pedestal;
     if let Some(p) = pedestal.as_mut() {
         p.compute_vertex_normals();
