@@ -19,9 +19,13 @@
 //! ```
 
 pub mod error;
+pub mod estimator;
 pub mod noise;
+pub mod paths;
 pub mod render;
 pub mod rock;
+pub mod sensor;
+pub mod sequence;
 pub mod terrain;
 pub mod texture;
 pub mod world;

@@ -1,7 +1,12 @@
 //! The `scarp` command line: one module per subcommand, each with its own clap `Args` struct and a
 //! `run` function.
 
+pub mod render;
+pub mod simulate;
+pub mod world;
+
 use clap::{Parser, Subcommand};
+use indicatif::{ProgressBar, ProgressStyle};
 
 /// Find, localize and map precariously balanced rocks with a small drone.
 #[derive(Debug, Parser)]
@@ -17,7 +22,14 @@ pub struct Cli {
 
 /// The subcommands.
 #[derive(Debug, Subcommand)]
-pub enum Command {}
+pub enum Command {
+    /// Run the simulated mission on a world (the main job).
+    Simulate(simulate::SimulateArgs),
+    /// Render a camera path through a world into a TUM RGB-D sequence.
+    Render(render::RenderArgs),
+    /// Write a world's ground-truth meshes and `world.json`.
+    World(world::WorldArgs),
+}
 
 /// Runs a parsed command line.
 ///
@@ -25,7 +37,21 @@ pub enum Command {}
 /// Whatever the subcommand reports; the message names the file, line or key at fault.
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     init_logging(&cli.log);
-    match cli.command {}
+    match cli.command {
+        Command::Simulate(args) => simulate::run(args),
+        Command::Render(args) => render::run(args),
+        Command::World(args) => world::run(args),
+    }
+}
+
+/// A progress bar on a terminal; hidden when stderr is not one (CI, pipes).
+pub fn progress_bar(length: u64, message: &'static str) -> ProgressBar {
+    let bar = ProgressBar::new(length);
+    if let Ok(style) = ProgressStyle::with_template("{msg} [{bar:40}] {pos}/{len} ({eta})") {
+        bar.set_style(style.progress_chars("=> "));
+    }
+    bar.set_message(message);
+    bar
 }
 
 fn init_logging(level: &str) {
