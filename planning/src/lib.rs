@@ -1,5 +1,8 @@
 //! scarp-planning (WIP)
 pub mod camera;
+pub mod clearance;
+pub mod control;
+pub mod dynamics;
 pub mod error;
 pub mod geometry;
 pub mod minsnap;
