@@ -92,7 +92,7 @@ pub fn yaw_toward(from: &Point3<f64>, to: &Point3<f64>) -> f64 {
 }
 
 /// Principal component analysis of a point set (the paper's ellipsoid of the target points).
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct PointSetPca {
     /// Centroid C_e of the points (world ENU, metres).
     pub centroid_m: Point3<f64>,
