@@ -21,10 +21,12 @@ pub struct ControllerConfig {
     /// Velocity gain K_v per world axis (1/s). Default (1.5, 1.5, 3.3) (DESIGN).
     pub velocity_gain_per_s: [f64; 3],
     /// Attitude gain k_R per body axis, as angular acceleration per unit error (1/s²).
-    /// Default (150, 150, 40) (tuned here: ~12 rad/s roll/pitch bandwidth at 100 Hz).
+    /// Default (400, 400, 40) (tuned here: ω_n = 20 rad/s on roll and pitch, which the 100 Hz
+    /// loop and 20 ms motors still follow; slower attitude loops eat the light damping of the
+    /// DESIGN position gains, ζ ≈ 0.27 on x and y).
     pub attitude_gain_per_s2: [f64; 3],
-    /// Angular-rate gain k_Ω per body axis (1/s). Default (20, 20, 12) (tuned with k_R for
-    /// damping ≈ 0.8 on roll and pitch).
+    /// Angular-rate gain k_Ω per body axis (1/s). Default (35, 35, 12) (tuned with k_R:
+    /// damping ≈ 0.87 on roll and pitch).
     pub rate_gain_per_s: [f64; 3],
     /// Attitude gain of the body-rate output, for autopilots that take rate commands (1/s).
     /// Default (8, 8, 4) (an attitude time constant of 0.125 s, as in the paper's controller).
@@ -43,8 +45,8 @@ impl Default for ControllerConfig {
         Self {
             position_gain_per_s2: [8.0, 8.0, 20.0],
             velocity_gain_per_s: [1.5, 1.5, 3.3],
-            attitude_gain_per_s2: [150.0, 150.0, 40.0],
-            rate_gain_per_s: [20.0, 20.0, 12.0],
+            attitude_gain_per_s2: [400.0, 400.0, 40.0],
+            rate_gain_per_s: [35.0, 35.0, 12.0],
             body_rate_gain_per_s: [8.0, 8.0, 4.0],
             max_tilt_deg: 40.0,
             rate_hz: 100.0,
