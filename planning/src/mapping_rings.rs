@@ -200,13 +200,15 @@ impl RingPlan {
         bands.sort_by(|a, b| a.0.total_cmp(&b.0));
         let mut gaps = Vec::new();
         let mut covered_to = self.cylinder.z_bottom_m;
+        // Rounding in the band formulas must not show up as a gap.
+        let tol = 1e-9 * (1.0 + self.cylinder.z_top_m.abs());
         for (lo, hi) in bands {
-            if lo > covered_to && covered_to < self.cylinder.z_top_m {
+            if lo > covered_to + tol && covered_to < self.cylinder.z_top_m {
                 gaps.push((covered_to, lo.min(self.cylinder.z_top_m)));
             }
             covered_to = covered_to.max(hi);
         }
-        if covered_to < self.cylinder.z_top_m {
+        if covered_to + tol < self.cylinder.z_top_m {
             gaps.push((covered_to, self.cylinder.z_top_m));
         }
         gaps
