@@ -237,7 +237,7 @@ impl TerrainShape {
 #[derive(Debug, Clone)]
 enum ObstacleShape {
     Mesh {
-        mesh: TriMesh,
+        mesh: Box<TriMesh>,
         origin_m: Point3<f64>,
         oriented: bool,
     },
@@ -281,7 +281,7 @@ impl ObstacleShape {
                         ),
                     };
                 Ok(Self::Mesh {
-                    mesh,
+                    mesh: Box::new(mesh),
                     origin_m: origin,
                     oriented,
                 })

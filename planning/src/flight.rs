@@ -205,11 +205,10 @@ impl Simulator {
             max_tilt = max_tilt.max(state.tilt_rad().to_degrees());
             ref_v = ref_v.max(r.flat.velocity_mps.norm());
             ref_a = ref_a.max(r.flat.acceleration_mps2.norm());
-            if k % clearance_every == 0 || k == ticks {
-                if let Some(c) = env.clearance_at(&state.position_m) {
-                    min_clear =
-                        Some(min_clear.map_or(c.clearance_m, |m: f64| m.min(c.clearance_m)));
-                }
+            if (k % clearance_every == 0 || k == ticks)
+                && let Some(c) = env.clearance_at(&state.position_m)
+            {
+                min_clear = Some(min_clear.map_or(c.clearance_m, |m: f64| m.min(c.clearance_m)));
             }
             let out = self.controller.update(&state, &r);
             samples.push(FlightSample {

@@ -493,14 +493,14 @@ fn solve_inner(
     // Fixed values (free entries are filled after the solve).
     let mut values: [Vec<f64>; FLAT_DIMS] = std::array::from_fn(|_| vec![0.0; n_vals]);
     for (knot, w) in wps.iter().enumerate() {
-        for d in 0..3 {
-            values[d][KNOT_DERIVS * knot] = w.position_m[d];
+        for (d, v) in values.iter_mut().take(3).enumerate() {
+            v[KNOT_DERIVS * knot] = w.position_m[d];
         }
         values[3][KNOT_DERIVS * knot] = w.yaw_rad;
     }
-    for d in 0..3 {
-        values[d][1] = start.velocity_mps[d];
-        values[d][2] = start.acceleration_mps2[d];
+    for (d, v) in values.iter_mut().take(3).enumerate() {
+        v[1] = start.velocity_mps[d];
+        v[2] = start.acceleration_mps2[d];
     }
     values[3][1] = start.yaw_rate_radps;
 

@@ -103,12 +103,13 @@ impl Heightfield {
                 ),
             });
         }
-        if self.heights_m.len() != self.nx * self.ny {
+        if Some(self.heights_m.len()) != self.nx.checked_mul(self.ny) {
             return Err(PlanError::InvalidTerrain {
                 reason: format!(
-                    "heights_m has {} values, expected nx·ny = {}",
+                    "heights_m has {} values, expected nx·ny = {}·{}",
                     self.heights_m.len(),
-                    self.nx * self.ny
+                    self.nx,
+                    self.ny
                 ),
             });
         }
@@ -147,7 +148,7 @@ impl Heightfield {
     /// Bilinear terrain height at world (x, y) (metres), or `None` off the grid or for
     /// non-finite input.
     pub fn height_at(&self, x_m: f64, y_m: f64) -> Option<f64> {
-        if !(x_m.is_finite() && y_m.is_finite()) || !self.contains(x_m, y_m) {
+        if !(x_m.is_finite() && y_m.is_finite() && self.contains(x_m, y_m)) {
             return None;
         }
         let u = (x_m - self.origin_x_m) / self.spacing_m;
