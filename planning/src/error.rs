@@ -128,6 +128,14 @@ pub enum PlanError {
         /// Why no repair was possible.
         reason: String,
     },
+    /// Writing or drawing an output failed.
+    #[error("cannot write {path}: {reason}")]
+    Output {
+        /// The file (or `(in memory)` for drawing).
+        path: String,
+        /// What failed.
+        reason: String,
+    },
     /// The simulated vehicle left the reference so far that the flight was abandoned.
     #[error("flight diverged at t = {time_s:.2} s: position error {position_error_m:.2} m")]
     FlightDiverged {

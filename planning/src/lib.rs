@@ -11,6 +11,7 @@
 //! - [`dynamics`]: quadrotor rigid-body model with motor limits, drag and gusts, RK4.
 //! - [`clearance`]: distance to the terrain (a parry3d heightfield) and the rocks; repairs.
 //! - [`flight`]: flies a trajectory and reports the `flight.json` metrics.
+//! - `plot` (feature `plot`, on by default): top and side view PNGs, without fonts.
 //!
 //! Conventions: world ENU (x east, y north, z up, metres), body FLU, camera OpenCV; transforms
 //! are named by what they map (`world_from_body`); units are in the names; everything is f64.
@@ -60,6 +61,8 @@ pub mod flight;
 pub mod geometry;
 pub mod mapping_rings;
 pub mod minsnap;
+#[cfg(feature = "plot")]
+pub mod plot;
 pub mod terrain;
 
 pub use error::PlanError;
