@@ -537,7 +537,13 @@ pub fn plan_clear_trajectory(
                 repairs.len()
             )));
         }
-        let seg = report.worst_segment.min(path.waypoints.len() - 2);
+        // The leg of the input path that holds the worst time (long legs may have been split
+        // into several trajectory segments).
+        let times = traj.waypoint_times_s();
+        let seg = times
+            .partition_point(|&t| t <= report.worst_at)
+            .saturating_sub(1)
+            .min(path.waypoints.len() - 2);
         let (a, b) = (path.waypoints[seg], path.waypoints[seg + 1]);
         let mid = Waypoint::new(
             Point3::from((a.position_m.coords + b.position_m.coords) * 0.5),

@@ -10,7 +10,9 @@
 //! the current velocity, acceleration and yaw rate; the end is at rest.
 //!
 //! The reduced Hessian `H_PP` is symmetric positive definite; it is Jacobi-scaled and factored
-//! with faer's dense Cholesky (sequential, so results are bit-for-bit reproducible).
+//! with faer's Cholesky: dense and sequential (bit-for-bit reproducible) up to 240 unknowns
+//! (60 segments), sparse beyond, where its block-tridiagonal structure makes that linear in the
+//! number of segments.
 //!
 //! Time allocation: a trapezoidal-profile guess per segment, then (optionally) gradient descent
 //! on the relative segment times at fixed total time, with the analytic gradient from the
@@ -19,7 +21,9 @@
 
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt;
-use faer::{Mat, Par};
+use faer::linalg::solvers::Solve;
+use faer::sparse::{SparseColMat, Triplet};
+use faer::{Mat, Par, Side};
 use nalgebra::{Point3, SMatrix, SVector, Vector3, Vector4};
 use serde::{Deserialize, Serialize};
 
@@ -60,6 +64,10 @@ pub struct MinSnapConfig {
     pub max_scaling_iterations: usize,
     /// Shortest allowed segment duration (s). Default 0.1.
     pub min_segment_time_s: f64,
+    /// Legs longer than this are split into equal segments with intermediate waypoints on the
+    /// straight line (and interpolated yaw), so the trajectory can cruise near v_max instead of
+    /// following one bell-shaped polynomial (m). 0 disables. Default 4.
+    pub max_segment_length_m: f64,
 }
 
 impl Default for MinSnapConfig {
@@ -74,6 +82,7 @@ impl Default for MinSnapConfig {
             time_refine_iterations: 15,
             max_scaling_iterations: 40,
             min_segment_time_s: 0.1,
+            max_segment_length_m: 4.0,
         }
     }
 }
@@ -93,6 +102,12 @@ impl MinSnapConfig {
         )?;
         check_positive("min_snap.sample_period_s", self.sample_period_s)?;
         check_positive("min_snap.min_segment_time_s", self.min_segment_time_s)?;
+        check_range(
+            "min_snap.max_segment_length_m",
+            self.max_segment_length_m,
+            0.0,
+            1e9,
+        )?;
         Ok(())
     }
 }
@@ -186,6 +201,8 @@ fn falling(i: usize, k: usize) -> f64 {
 pub struct Trajectory {
     segments: Vec<Segment>,
     knot_times_s: Vec<f64>,
+    /// Knot index of each input waypoint (knots added by subdividing long legs are not listed).
+    waypoint_knots: Vec<usize>,
 }
 
 impl Trajectory {
@@ -207,9 +224,19 @@ impl Trajectory {
             knots.push(knots[i] + s.duration_s);
         }
         Ok(Self {
+            waypoint_knots: (0..knots.len()).collect(),
             segments,
             knot_times_s: knots,
         })
+    }
+
+    /// Times (s) at which the trajectory passes the input waypoints, in order. Equal to
+    /// [`Trajectory::knot_times_s`] unless long legs were subdivided.
+    pub fn waypoint_times_s(&self) -> Vec<f64> {
+        self.waypoint_knots
+            .iter()
+            .map(|&k| self.knot_times_s[k])
+            .collect()
     }
 
     /// The polynomial pieces.
@@ -417,6 +444,67 @@ impl Basis {
     }
 }
 
+/// Reduced systems up to this size use dense Cholesky; larger ones (long lawn-mower patterns)
+/// use faer's sparse Cholesky, since H_PP is block-tridiagonal.
+const DENSE_MAX_UNKNOWNS: usize = 240;
+
+/// Solves the SPD system given by its lower-triangle triplets in place of `rhs`, densely and
+/// sequentially (bit-for-bit reproducible).
+fn solve_dense(
+    n: usize,
+    lower: &[(usize, usize, f64)],
+    rhs: &mut Mat<f64>,
+) -> Result<(), PlanError> {
+    let mut h = Mat::<f64>::zeros(n, n);
+    for &(r, c, v) in lower {
+        h[(r, c)] += v;
+    }
+    let mut buf = MemBuffer::new(llt::factor::cholesky_in_place_scratch::<f64>(
+        n,
+        Par::Seq,
+        Default::default(),
+    ));
+    llt::factor::cholesky_in_place(
+        h.as_mut(),
+        Default::default(),
+        Par::Seq,
+        MemStack::new(&mut buf),
+        Default::default(),
+    )
+    .map_err(|e| PlanError::Solver {
+        reason: format!("Cholesky of the reduced Hessian failed: {e:?}"),
+    })?;
+    let mut sbuf = MemBuffer::new(llt::solve::solve_in_place_scratch::<f64>(
+        n,
+        FLAT_DIMS,
+        Par::Seq,
+    ));
+    llt::solve::solve_in_place(h.as_ref(), rhs.as_mut(), Par::Seq, MemStack::new(&mut sbuf));
+    Ok(())
+}
+
+/// Sparse counterpart of [`solve_dense`] (faer sparse Cholesky, lower side).
+fn solve_sparse(
+    n: usize,
+    lower: &[(usize, usize, f64)],
+    rhs: &mut Mat<f64>,
+) -> Result<(), PlanError> {
+    let trips: Vec<Triplet<usize, usize, f64>> = lower
+        .iter()
+        .map(|&(r, c, v)| Triplet::new(r, c, v))
+        .collect();
+    let h = SparseColMat::<usize, f64>::try_new_from_triplets(n, n, &trips).map_err(|e| {
+        PlanError::Solver {
+            reason: format!("building the sparse Hessian failed: {e:?}"),
+        }
+    })?;
+    let llt = h.sp_cholesky(Side::Lower).map_err(|e| PlanError::Solver {
+        reason: format!("sparse Cholesky of the reduced Hessian failed: {e:?}"),
+    })?;
+    llt.solve_in_place(rhs.as_mut());
+    Ok(())
+}
+
 /// Result of one fixed-time solve: the trajectory and all knot derivatives (per dim).
 struct Solved {
     trajectory: Trajectory,
@@ -482,6 +570,17 @@ fn solve_inner(
     start: &StartState,
     durations: &[f64],
 ) -> Result<Solved, PlanError> {
+    solve_inner_with(basis, wps, start, durations, DENSE_MAX_UNKNOWNS)
+}
+
+/// [`solve_inner`] with the dense/sparse switch point as a parameter.
+fn solve_inner_with(
+    basis: &Basis,
+    wps: &[Waypoint],
+    start: &StartState,
+    durations: &[f64],
+    dense_max_unknowns: usize,
+) -> Result<Solved, PlanError> {
     let n_seg = durations.len();
     let n_knots = n_seg + 1;
     let n_vals = KNOT_DERIVS * n_knots;
@@ -518,8 +617,11 @@ fn solve_inner(
     let n_free = free_index.iter().filter(|f| f.is_some()).count();
 
     if n_free > 0 {
-        let mut h = Mat::<f64>::zeros(n_free, n_free);
+        // Lower triangle of H_PP as triplets (duplicates are summed), and the right-hand side
+        // −H_PF d_F for the four flat outputs.
+        let mut trips: Vec<(usize, usize, f64)> = Vec::with_capacity(n_seg * 64);
         let mut rhs = Mat::<f64>::zeros(n_free, FLAT_DIMS);
+        let mut diag = vec![0.0; n_free];
         for (j, &t) in durations.iter().enumerate() {
             let hs = basis.segment_hessian(t);
             let base = KNOT_DERIVS * j;
@@ -530,7 +632,13 @@ fn solve_inner(
                 for b in 0..POLY_COEFFS {
                     let hab = hs[(a, b)];
                     match free_index[base + b] {
-                        Some(pb) => h[(pa, pb)] += hab,
+                        Some(pb) if pb <= pa => {
+                            trips.push((pa, pb, hab));
+                            if pa == pb {
+                                diag[pa] += hab;
+                            }
+                        }
+                        Some(_) => {}
                         None => {
                             for d in 0..FLAT_DIMS {
                                 rhs[(pa, d)] -= hab * values[d][base + b];
@@ -542,44 +650,27 @@ fn solve_inner(
         }
         // Jacobi scaling: the entries span many orders of magnitude (T^(k+l−7)).
         let mut scale = vec![0.0; n_free];
-        for (i, s) in scale.iter_mut().enumerate() {
-            let diag = h[(i, i)];
-            if !(diag.is_finite() && diag > 0.0) {
+        for (i, (s, &d)) in scale.iter_mut().zip(&diag).enumerate() {
+            if !(d.is_finite() && d > 0.0) {
                 return Err(PlanError::Solver {
-                    reason: format!("non-positive Hessian diagonal {diag} at free variable {i}"),
+                    reason: format!("non-positive Hessian diagonal {d} at free variable {i}"),
                 });
             }
-            *s = 1.0 / diag.sqrt();
+            *s = 1.0 / d.sqrt();
+        }
+        for (r, c, v) in &mut trips {
+            *v *= scale[*r] * scale[*c];
         }
         for j in 0..n_free {
-            for i in 0..n_free {
-                h[(i, j)] *= scale[i] * scale[j];
-            }
             for d in 0..FLAT_DIMS {
                 rhs[(j, d)] *= scale[j];
             }
         }
-        let mut buf = MemBuffer::new(llt::factor::cholesky_in_place_scratch::<f64>(
-            n_free,
-            Par::Seq,
-            Default::default(),
-        ));
-        llt::factor::cholesky_in_place(
-            h.as_mut(),
-            Default::default(),
-            Par::Seq,
-            MemStack::new(&mut buf),
-            Default::default(),
-        )
-        .map_err(|e| PlanError::Solver {
-            reason: format!("Cholesky of the reduced Hessian failed: {e:?}"),
-        })?;
-        let mut sbuf = MemBuffer::new(llt::solve::solve_in_place_scratch::<f64>(
-            n_free,
-            FLAT_DIMS,
-            Par::Seq,
-        ));
-        llt::solve::solve_in_place(h.as_ref(), rhs.as_mut(), Par::Seq, MemStack::new(&mut sbuf));
+        if n_free <= dense_max_unknowns {
+            solve_dense(n_free, &trips, &mut rhs)?;
+        } else {
+            solve_sparse(n_free, &trips, &mut rhs)?;
+        }
         for (g, f) in free_index.iter().enumerate() {
             if let Some(p) = *f {
                 for d in 0..FLAT_DIMS {
@@ -711,9 +802,36 @@ fn refine_durations(
     Ok(durations)
 }
 
+/// Splits legs longer than `max_len` (0 = never) into equal pieces; returns the new path and
+/// the index of each original waypoint in it.
+fn subdivide(wps: &[Waypoint], max_len: f64) -> (Path, Vec<usize>) {
+    let mut out = Vec::with_capacity(wps.len());
+    let mut index = Vec::with_capacity(wps.len());
+    for (i, w) in wps.iter().enumerate() {
+        if i > 0 && max_len > 0.0 {
+            let a = wps[i - 1];
+            let len = (w.position_m - a.position_m).norm();
+            let pieces = (len / max_len).ceil() as usize;
+            for k in 1..pieces {
+                let f = k as f64 / pieces as f64;
+                out.push(Waypoint::new(
+                    a.position_m + (w.position_m - a.position_m) * f,
+                    a.yaw_rad + (w.yaw_rad - a.yaw_rad) * f,
+                ));
+            }
+        }
+        index.push(out.len());
+        out.push(*w);
+    }
+    (Path::new(out), index)
+}
+
 /// Plans a minimum-snap trajectory through `path`, starting from `start` and ending at rest,
 /// then scales time so that speed, acceleration and yaw rate stay within `cfg`'s limits
 /// (verified by dense sampling at `cfg.sample_period_s`).
+///
+/// Legs longer than `cfg.max_segment_length_m` get intermediate waypoints on the straight line
+/// (see [`Trajectory::waypoint_times_s`] for when the input waypoints are passed).
 ///
 /// The first waypoint is the start position and yaw. Fails on bad input (fewer than 2
 /// waypoints, NaN, identical consecutive waypoints), a start faster than the limits, a failed
@@ -734,7 +852,9 @@ pub fn plan_min_snap(
         });
     }
     let basis = Basis::new()?;
-    let durations = initial_durations(path, cfg);
+    let (dense_path, waypoint_knots) = subdivide(wps, cfg.max_segment_length_m);
+    let wps = &dense_path.waypoints[..];
+    let durations = initial_durations(&dense_path, cfg);
     let mut durations = refine_durations(&basis, wps, start, durations, cfg)?;
 
     // The start values cannot be scaled away: never aim below them.
@@ -772,12 +892,17 @@ pub fn plan_min_snap(
             *t = (*t * factor).max(cfg.min_segment_time_s);
         }
     }
-    best_feasible.ok_or(PlanError::LimitsNotMet {
-        speed_mps: last_peaks.speed_mps,
-        accel_mps2: last_peaks.accel_mps2,
-        v_max_mps: cfg.max_speed_mps,
-        a_max_mps2: cfg.max_accel_mps2,
-    })
+    best_feasible
+        .map(|mut t| {
+            t.waypoint_knots = waypoint_knots;
+            t
+        })
+        .ok_or(PlanError::LimitsNotMet {
+            speed_mps: last_peaks.speed_mps,
+            accel_mps2: last_peaks.accel_mps2,
+            v_max_mps: cfg.max_speed_mps,
+            a_max_mps2: cfg.max_accel_mps2,
+        })
 }
 
 #[cfg(test)]
@@ -806,6 +931,34 @@ mod tests {
         assert!(end.velocity_mps.norm() < 1e-12);
         // Symmetric profile: halfway at half time.
         assert!((traj.sample(2.0).position_m.x - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn sparse_and_dense_solves_agree() {
+        let basis = Basis::new().unwrap();
+        let wps: Vec<Waypoint> = (0..90)
+            .map(|i| {
+                let t = i as f64 * 0.7;
+                Waypoint::new(
+                    Point3::new(10.0 * t.cos() + t, 10.0 * t.sin(), 5.0 + (2.0 * t).sin()),
+                    0.1 * t,
+                )
+            })
+            .collect();
+        let durations = vec![3.0; wps.len() - 1];
+        let start = StartState {
+            velocity_mps: Vector3::new(0.3, 0.0, 0.1),
+            ..Default::default()
+        };
+        let dense = solve_inner_with(&basis, &wps, &start, &durations, usize::MAX).unwrap();
+        let sparse = solve_inner_with(&basis, &wps, &start, &durations, 0).unwrap();
+        for d in 0..FLAT_DIMS {
+            for (a, b) in dense.knot_values[d].iter().zip(&sparse.knot_values[d]) {
+                assert!((a - b).abs() < 1e-9 * (1.0 + a.abs()), "{a} vs {b}");
+            }
+        }
+        let (c0, _) = cost_and_gradient(&basis, &dense, &durations);
+        assert!(c0.is_finite() && c0 > 0.0);
     }
 
     #[test]

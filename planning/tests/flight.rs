@@ -138,3 +138,80 @@ fn hover_recovers_from_thirty_degree_tilt() {
         assert!(tilt < 2.0, "tilt after 1 s: {tilt}°");
     }
 }
+
+#[test]
+fn fine_localization_arc_is_flown_with_yaw_toward_the_target() {
+    let (env, points) = common::two_metre_rock();
+    let cfg = PlanningConfig::default();
+    let current = Waypoint::new(Point3::new(-25.0, 5.0, 15.0), 0.0);
+    let plan = plan_fine_localization_clear(
+        &points,
+        &current,
+        15.0,
+        &cfg.camera,
+        &cfg.fine_localize,
+        &env,
+        &cfg.clearance,
+    )
+    .unwrap();
+    let (traj, _, _) = plan_clear_trajectory(
+        &plan.path,
+        &StartState::default(),
+        &cfg.min_snap,
+        &env,
+        &cfg.clearance,
+    )
+    .unwrap();
+    let r = fly_trajectory(&traj, &env, &cfg.flight).unwrap();
+    println!(
+        "fine localization: {:.1} s, {:?}",
+        traj.duration_s(),
+        r.metrics
+    );
+    assert!(r.metrics.position_rms_m <= 0.10 && r.metrics.position_max_m <= 0.3);
+    assert!(r.metrics.yaw_max_deg <= 5.0);
+    // On the circle the heading points at C_e within the tracking error.
+    let ce = plan.pca.centroid_m;
+    let on_circle = r.samples.iter().filter(|s| {
+        ((s.position_m.xy() - plan.circle_center_m.xy()).norm() - plan.radius_m).abs() < 0.05
+            && s.time_s > traj.knot_times_s()[2]
+    });
+    for s in on_circle {
+        let d = ce - s.position_m;
+        let yaw = s.world_from_body * Vector3::x();
+        let err = scarp_planning::geometry::wrap_angle(d.y.atan2(d.x) - yaw.y.atan2(yaw.x))
+            .abs()
+            .to_degrees();
+        assert!(err < 5.0, "heading off C_e by {err}° at t = {}", s.time_s);
+    }
+}
+
+#[test]
+fn long_lawn_mower_plans_fast_and_flies() {
+    let cfg = PlanningConfig::default();
+    let area = SearchArea::Rectangle {
+        min_x_m: 0.0,
+        min_y_m: 0.0,
+        max_x_m: 60.0,
+        max_y_m: 600.0,
+    };
+    // Lanes across the long side: many short lanes, many waypoints (the sparse solver's case).
+    let coverage = CoverageConfig {
+        lane_heading_deg: Some(0.0),
+        ..cfg.coverage
+    };
+    let plan = plan_lawn_mower(&area, 12.0, 0.0, &cfg.camera, &coverage).unwrap();
+    assert!(plan.lanes > 30, "{} lanes", plan.lanes);
+    let t0 = std::time::Instant::now();
+    let traj = plan_min_snap(&plan.path, &StartState::default(), &cfg.min_snap).unwrap();
+    println!(
+        "lawn-mower: {} waypoints planned in {:.2} s, {:.0} s long",
+        plan.path.waypoints.len(),
+        t0.elapsed().as_secs_f64(),
+        traj.duration_s()
+    );
+    let r = fly_trajectory(&traj, &Environment::empty(), &cfg.flight).unwrap();
+    println!("lawn-mower flight: {:?}", r.metrics);
+    assert!(r.metrics.position_max_m <= 0.3 && r.metrics.yaw_max_deg <= 5.0);
+    assert!(r.metrics.min_clearance_m.is_none());
+}

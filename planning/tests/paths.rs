@@ -236,13 +236,13 @@ fn blocked_ring_is_rejected_with_a_reason() {
 
 #[test]
 fn corner_bulge_is_pulled_back_by_inserted_waypoints() {
-    // Min-snap through a 90° corner bulges about 1.4 m outward on the first leg; a boulder sits
-    // 2.7 m from the straight leg, where the bulge passes.
+    // Min-snap through a 90° corner bulges about 0.17 m outward just before the corner; a
+    // boulder sits 1.62 m from the straight leg, where the bulge passes.
     let terrain = Heightfield::flat(-20.0, -20.0, 1.0, 41, 41, 0.0).unwrap();
     let boulder = Obstacle::Cylinder {
-        center_x_m: 6.0,
-        center_y_m: -2.9,
-        radius_m: 0.2,
+        center_x_m: 9.35,
+        center_y_m: -1.72,
+        radius_m: 0.1,
         z_bottom_m: 0.0,
         z_top_m: 8.0,
     };
