@@ -66,7 +66,8 @@ pub struct MinSnapConfig {
     pub min_segment_time_s: f64,
     /// Legs longer than this are split into equal segments with intermediate waypoints on the
     /// straight line (and interpolated yaw), so the trajectory can cruise near v_max instead of
-    /// following one bell-shaped polynomial (m). 0 disables. Default 4.
+    /// following one bell-shaped polynomial (m). 0 disables. Default 8 (longer than the chords of
+    /// the fine-localization and ring paths, whose waypoints already shape the curve).
     pub max_segment_length_m: f64,
 }
 
@@ -82,7 +83,7 @@ impl Default for MinSnapConfig {
             time_refine_iterations: 15,
             max_scaling_iterations: 40,
             min_segment_time_s: 0.1,
-            max_segment_length_m: 4.0,
+            max_segment_length_m: 8.0,
         }
     }
 }
