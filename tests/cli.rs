@@ -1,0 +1,158 @@
+//! End-to-end tests of the `scarp` binary: world ground truth, sequence rendering, bad input.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+struct TempDir(PathBuf);
+
+impl TempDir {
+    fn new(name: &str) -> Self {
+        let dir = std::env::temp_dir().join(format!("scarp-cli-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        Self(dir)
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+fn scarp(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_scarp"))
+        .args(args)
+        .output()
+        .expect("the scarp binary runs")
+}
+
+fn path_str(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+#[test]
+fn world_writes_ground_truth_meshes_and_world_json() {
+    let dir = TempDir::new("world");
+    let out = scarp(&[
+        "world",
+        "--world",
+        "default",
+        "--out",
+        path_str(&dir.0),
+        "--json",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let json: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.0.join("world.json")).unwrap()).unwrap();
+    let rocks = json["rocks"].as_array().unwrap();
+    assert_eq!(rocks.iter().filter(|r| r["role"] == "target").count(), 3);
+    assert!(rocks.iter().filter(|r| r["role"] == "distractor").count() >= 10);
+    for rock in rocks {
+        assert_eq!(rock["centroid"].as_array().unwrap().len(), 3);
+        assert!(rock["height_m"].as_f64().unwrap() > 0.3);
+        let mesh =
+            scarp_export::ply::read_mesh(dir.0.join(rock["mesh"].as_str().unwrap())).unwrap();
+        assert!(mesh.face_count() > 1000);
+    }
+    assert!(
+        rocks
+            .iter()
+            .filter(|r| r["role"] == "target")
+            .all(|r| r["contact"]["area_m2"].as_f64().unwrap() > 0.0)
+    );
+    assert!(dir.0.join("terrain.ply").exists());
+    // The printed JSON is the file's content.
+    let printed: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(printed, json);
+}
+
+#[test]
+fn render_writes_a_tum_sequence_that_loads() {
+    let dir = TempDir::new("render");
+    let seq = dir.0.join("seq");
+    let out = scarp(&[
+        "render",
+        "--path",
+        "orbit",
+        "--frames",
+        "4",
+        "--out",
+        path_str(&seq),
+        "--seed",
+        "3",
+        "--json",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let summary: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(summary["frames"], 4);
+    for file in [
+        "rgb.txt",
+        "depth.txt",
+        "groundtruth.txt",
+        "estimate.txt",
+        "camera.toml",
+        "boxes.txt",
+    ] {
+        assert!(seq.join(file).exists(), "{file}");
+    }
+    let sequence = scarp_datasets::sequence::Sequence::open(&seq).unwrap();
+    assert_eq!(sequence.len(), 4);
+    assert_eq!(sequence.camera_file.depth_scale, 5000.0);
+    // The orbit looks at target 1, which is in every frame's boxes.
+    let frames_with_target = sequence.boxes.iter().filter(|b| b.id == 1).count();
+    assert_eq!(frames_with_target, 4);
+    let frame = sequence.load_frame(2).unwrap();
+    assert!(frame.valid_depth_count() > 100_000);
+    assert!(frame.instance_mask.is_some());
+}
+
+#[test]
+fn bad_input_fails_with_a_message_naming_the_culprit() {
+    let dir = TempDir::new("bad");
+    let world = dir.0.join("w.toml");
+    std::fs::write(&world, "[terrain.procedural]\nsize_m = 20.0\nsize = 3\n").unwrap();
+    let out = scarp(&[
+        "world",
+        "--world",
+        path_str(&world),
+        "--out",
+        path_str(&dir.0.join("o")),
+    ]);
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("w.toml") && stderr.contains("size"),
+        "{stderr}"
+    );
+
+    let out = scarp(&[
+        "render",
+        "--world",
+        path_str(&dir.0.join("missing.toml")),
+        "--out",
+        path_str(&dir.0.join("s")),
+    ]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("missing.toml"));
+
+    let path_file = dir.0.join("path.txt");
+    std::fs::write(&path_file, "0 0 0 5 0 0 0 1\n0 1 0 5 0 0 0 1\n").unwrap();
+    let out = scarp(&[
+        "render",
+        "--path",
+        path_str(&path_file),
+        "--out",
+        path_str(&dir.0.join("s")),
+    ]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("path.txt:2"));
+}
