@@ -199,7 +199,8 @@ mod tests {
     #[test]
     fn valley_depth_of_a_waist() {
         let d = valley_depths(&[4.0, 2.0, 1.0, 3.0, 5.0, 0.5]);
-        assert_eq!(d[2], 3.0);
+        assert_eq!(d[2], 4.0);
+        assert_eq!(d[1], 2.0);
         assert_eq!(d[0], 0.0);
         assert_eq!(d[5], 0.0);
         assert!(valley_depths(&[1.0, 0.0, 2.0])[1].is_infinite());
@@ -221,7 +222,11 @@ mod tests {
         ]);
         let neck = find_neck(&solid, 256, 1.5, 0.01);
         assert!(neck.found);
-        assert!(neck.height_m < 0.0 && neck.height_m > -1e-6, "{}", neck.height_m);
+        assert!(
+            neck.height_m < 0.0 && neck.height_m > -1e-6,
+            "{}",
+            neck.height_m
+        );
         assert!((neck.depth_ratio - 25.0).abs() < 1e-6);
     }
 

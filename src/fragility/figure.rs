@@ -68,10 +68,7 @@ impl View {
         let w = (x.1 - x.0).max(1e-9);
         let h = (y.1 - y.0).max(1e-9);
         let scale = ((size.0 - 2.0 * margin) / w).min((size.1 - 2.0 * margin) / h);
-        let offset = (
-            (size.0 - scale * w) / 2.0,
-            (size.1 - scale * h) / 2.0,
-        );
+        let offset = ((size.0 - scale * w) / 2.0, (size.1 - scale * h) / 2.0);
         Self {
             origin: (x.0, y.1),
             scale,
@@ -206,7 +203,10 @@ fn draw_side<DB: DrawingBackend>(
     label(
         area,
         text,
-        &format!("contact at {:.3} m, {:.4} m²", r.contact_height_m, r.contact_area_m2),
+        &format!(
+            "contact at {:.3} m, {:.4} m²",
+            r.contact_height_m, r.contact_area_m2
+        ),
         (10, hpx as i32 - 24),
         14,
         BLACK,
@@ -242,7 +242,14 @@ fn draw_polar<DB: DrawingBackend>(
         area.draw(&PathElement::new(pts, light.stroke_width(1)))
             .map_err(err)?;
         let (lx, ly) = px(ring, 80.0);
-        label(area, text, &format!("{ring:.0}°"), (lx + 3, ly), 12, RGBColor(120, 120, 120))?;
+        label(
+            area,
+            text,
+            &format!("{ring:.0}°"),
+            (lx + 3, ly),
+            12,
+            RGBColor(120, 120, 120),
+        )?;
         ring += ring_step;
     }
     for k in 0..12 {
@@ -253,7 +260,14 @@ fn draw_polar<DB: DrawingBackend>(
         ))
         .map_err(err)?;
         let (lx, ly) = px(outer * 1.08, theta);
-        label(area, text, &format!("{theta:.0}°"), (lx - 12, ly - 6), 12, BLACK)?;
+        label(
+            area,
+            text,
+            &format!("{theta:.0}°"),
+            (lx - 12, ly - 6),
+            12,
+            BLACK,
+        )?;
     }
     let n = r.alpha_deg.len();
     let mut curve: Vec<(i32, i32)> = r
@@ -284,7 +298,11 @@ fn draw_polar<DB: DrawingBackend>(
     Ok(())
 }
 
-fn draw_all<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, a: &FragilityAnalysis, text: bool) -> DrawResult {
+fn draw_all<DB: DrawingBackend>(
+    root: DrawingArea<DB, Shift>,
+    a: &FragilityAnalysis,
+    text: bool,
+) -> DrawResult {
     root.fill(&WHITE).map_err(err)?;
     let (left, right) = root.split_horizontally(FIGURE_WIDTH_PX / 2);
     draw_side(&left, a, text)?;
@@ -366,7 +384,11 @@ pub fn write_figure(analysis: &FragilityAnalysis, path: &Path) -> Result<(), Fra
                 .map_err(|e| fail(e.to_string()))?;
             png.into_inner()
         }
-        _ => return Err(fail(format!("unsupported figure extension `{ext}` (use .svg or .png)"))),
+        _ => {
+            return Err(fail(format!(
+                "unsupported figure extension `{ext}` (use .svg or .png)"
+            )));
+        }
     };
     write_atomic(path, &bytes).map_err(|e| fail(e.to_string()))
 }

@@ -147,9 +147,14 @@ mod tests {
         let m = MassProperties::from_integrals(&v, 2.0);
         let r = motion.rotation.to_rotation_matrix();
         let expected_body =
-            Matrix3::from_diagonal(&Vector3::new(9.0 + 16.0, 4.0 + 16.0, 4.0 + 9.0)) * (48.0 / 12.0);
+            Matrix3::from_diagonal(&Vector3::new(9.0 + 16.0, 4.0 + 16.0, 4.0 + 9.0))
+                * (48.0 / 12.0);
         let expected = r.matrix() * expected_body * r.matrix().transpose();
-        assert!((m.inertia_kg_m2 - expected).norm() < 1e-8, "{}", m.inertia_kg_m2);
+        assert!(
+            (m.inertia_kg_m2 - expected).norm() < 1e-8,
+            "{}",
+            m.inertia_kg_m2
+        );
     }
 
     #[test]
@@ -162,7 +167,11 @@ mod tests {
         }
         let v = integrate(&solid).unwrap();
         let exact = 4.0 / 3.0 * std::f64::consts::PI * r.powi(3);
-        assert!(((v.volume_m3 - exact) / exact).abs() < 1e-3, "{}", v.volume_m3);
+        assert!(
+            ((v.volume_m3 - exact) / exact).abs() < 1e-3,
+            "{}",
+            v.volume_m3
+        );
         assert!((v.centroid - Point3::new(1.0, 2.0, 3.0)).norm() < 1e-3 * r);
         let m = MassProperties::from_integrals(&v, 1.0);
         let i_exact = 0.4 * exact * r * r;

@@ -161,7 +161,11 @@ impl FragilityConfig {
     pub fn validate(&self) -> Result<(), FragilityError> {
         let up = Vector3::from(self.up);
         if !(up.iter().all(|c| c.is_finite()) && up.norm() > 1e-12) {
-            return Err(invalid("up", format!("{:?}", self.up), "must be a finite non-zero vector"));
+            return Err(invalid(
+                "up",
+                format!("{:?}", self.up),
+                "must be a finite non-zero vector",
+            ));
         }
         let positive = |field, v: f64| {
             if v.is_finite() && v > 0.0 {
@@ -199,7 +203,11 @@ impl FragilityConfig {
             ));
         }
         if self.profile_levels < 8 {
-            return Err(invalid("profile_levels", self.profile_levels, "must be at least 8"));
+            return Err(invalid(
+                "profile_levels",
+                self.profile_levels,
+                "must be at least 8",
+            ));
         }
         Ok(())
     }
@@ -493,7 +501,9 @@ pub fn analyze_detailed(
         }
         ContactSpec::Pedestal(_) => {
             // Invariant: `pedestal` is `Some` exactly for `ContactSpec::Pedestal`.
-            let ped = pedestal.as_ref().ok_or(FragilityError::EmptyMesh { mesh: "pedestal" })?;
+            let ped = pedestal
+                .as_ref()
+                .ok_or(FragilityError::EmptyMesh { mesh: "pedestal" })?;
             let top = contact::pedestal_top(&solid, ped)?;
             let (rock_lo, _) = solid
                 .z_range()

@@ -475,9 +475,10 @@ fn merge_holes(points: &[Point2<f64>], outer: &[u32], holes: &[&[u32]]) -> Optio
             if p == m {
                 return false;
             }
-            let blocked = ring_edges.iter().chain(&hole_edges).any(|&(a, b)| {
-                segments_cross(&m, &p, &points[a as usize], &points[b as usize])
-            });
+            let blocked = ring_edges
+                .iter()
+                .chain(&hole_edges)
+                .any(|&(a, b)| segments_cross(&m, &p, &points[a as usize], &points[b as usize]));
             if blocked {
                 return false;
             }
@@ -605,10 +606,20 @@ mod tests {
         // Every cap triangle is counter-clockwise (non-negative area) before reversal.
         let pts: Vec<Point2<f64>> = cut.section.points.iter().map(|p| p.xy()).collect();
         let (tris, _) = triangulate(&pts, &cut.section.loops);
-        assert!(tris.iter().all(|t| orient(&pts[t[0] as usize], &pts[t[1] as usize], &pts[t[2] as usize]) >= 0.0));
+        assert!(tris.iter().all(|t| orient(
+            &pts[t[0] as usize],
+            &pts[t[1] as usize],
+            &pts[t[2] as usize]
+        ) >= 0.0));
         let sum: f64 = tris
             .iter()
-            .map(|t| 0.5 * orient(&pts[t[0] as usize], &pts[t[1] as usize], &pts[t[2] as usize]))
+            .map(|t| {
+                0.5 * orient(
+                    &pts[t[0] as usize],
+                    &pts[t[1] as usize],
+                    &pts[t[2] as usize],
+                )
+            })
             .sum();
         assert!((sum - a).abs() < 1e-12);
     }

@@ -125,7 +125,11 @@ pub(crate) fn alpha_min_spread(
         .collect();
     let ok: Vec<f64> = results.iter().flatten().copied().collect();
     let n = ok.len() as f64;
-    let mean = if ok.is_empty() { 0.0 } else { ok.iter().sum::<f64>() / n };
+    let mean = if ok.is_empty() {
+        0.0
+    } else {
+        ok.iter().sum::<f64>() / n
+    };
     let std = if ok.len() < 2 {
         0.0
     } else {
