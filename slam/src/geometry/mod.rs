@@ -1,9 +1,11 @@
 //! Cameras and rigid transforms.
 
 mod camera;
+mod polygon;
 mod transform;
 
 pub use camera::PinholeCamera;
+pub use polygon::{convex_hull_2d, polygon_signed_area};
 pub use transform::{
     check_finite_isometry, isometry_from_tum, look_at, quaternion_from_xyzw, rotation_angle_deg,
     tum_from_isometry, yaw_pitch_roll_from_rotation,
