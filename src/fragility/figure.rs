@@ -310,19 +310,6 @@ fn draw_all<DB: DrawingBackend>(
     root.present().map_err(err)
 }
 
-/// Writes `bytes` to a temporary file beside `path` and renames it into place.
-pub(crate) fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "figure".into());
-    let tmp = path.with_file_name(format!(".{name}.{}.tmp", std::process::id()));
-    std::fs::write(&tmp, bytes)?;
-    std::fs::rename(&tmp, path).inspect_err(|_| {
-        let _ = std::fs::remove_file(&tmp);
-    })
-}
-
 /// Renders the figure as SVG text (with labels).
 ///
 /// # Errors
@@ -390,5 +377,5 @@ pub fn write_figure(analysis: &FragilityAnalysis, path: &Path) -> Result<(), Fra
             )));
         }
     };
-    write_atomic(path, &bytes).map_err(|e| fail(e.to_string()))
+    scarp_export::atomic::write_bytes_atomically(path, &bytes).map_err(|e| fail(e.to_string()))
 }

@@ -9,59 +9,26 @@
 //! pushing the rock towards θ brings the resultant force onto that edge.
 
 use nalgebra::{Point2, Vector2};
+use scarp_slam::geometry::{convex_hull_2d, polygon_signed_area};
 use serde::{Deserialize, Serialize};
 
 use super::section::orient;
 
-/// Convex hull of 2-D points (Andrew's monotone chain), counter-clockwise, without collinear or
-/// repeated points. One or two points come back as they are (deduplicated); non-finite points
-/// are ignored.
+/// Convex hull of 2-D points, counter-clockwise, without collinear or repeated points; fewer
+/// than three distinct points come back as they are, non-finite points are ignored (the geometry
+/// core's [`convex_hull_2d`]).
 pub fn convex_hull(points: &[Point2<f64>]) -> Vec<Point2<f64>> {
-    let mut p: Vec<Point2<f64>> = points
-        .iter()
-        .copied()
-        .filter(|q| q.x.is_finite() && q.y.is_finite())
-        .collect();
-    p.sort_by(|a, b| a.x.total_cmp(&b.x).then(a.y.total_cmp(&b.y)));
-    p.dedup();
-    if p.len() < 3 {
-        return p;
-    }
-    let mut hull: Vec<Point2<f64>> = Vec::with_capacity(2 * p.len());
-    for pass in 0..2 {
-        let start = hull.len();
-        let iter: Box<dyn Iterator<Item = &Point2<f64>>> = if pass == 0 {
-            Box::new(p.iter())
-        } else {
-            Box::new(p.iter().rev())
-        };
-        for q in iter {
-            while hull.len() >= start + 2
-                && orient(&hull[hull.len() - 2], &hull[hull.len() - 1], q) <= 0.0
-            {
-                hull.pop();
-            }
-            hull.push(*q);
-        }
-        hull.pop();
-    }
-    if hull.len() < 3 {
-        // All points collinear: keep the two extremes.
-        hull.dedup();
-    }
-    hull
+    convex_hull_2d(points)
 }
 
-/// Area of a polygon given counter-clockwise (negative when clockwise), m².
+/// Area of a polygon given counter-clockwise (negative when clockwise), m² (the geometry core's
+/// [`polygon_signed_area`]; 0 for fewer than three points).
 pub fn polygon_area(polygon: &[Point2<f64>]) -> f64 {
-    let n = polygon.len();
-    if n < 3 {
-        return 0.0;
+    if polygon.len() < 3 {
+        0.0
+    } else {
+        polygon_signed_area(polygon)
     }
-    let o = polygon[0];
-    (1..n - 1)
-        .map(|k| 0.5 * orient(&o, &polygon[k], &polygon[k + 1]))
-        .sum()
 }
 
 /// Intersection of a convex polygon with a convex counter-clockwise clip polygon
