@@ -1,6 +1,8 @@
 //! The `scarp` command line: one module per subcommand, each with its own clap `Args` struct and a
 //! `run` function.
 
+pub mod fragility;
+
 use clap::{Parser, Subcommand};
 
 /// Find, localize and map precariously balanced rocks with a small drone.
@@ -17,7 +19,11 @@ pub struct Cli {
 
 /// The subcommands.
 #[derive(Debug, Subcommand)]
-pub enum Command {}
+pub enum Command {
+    /// Fragility of a rock mesh: contact, mass properties, rocking angles α(θ), α_min and the
+    /// toppling acceleration g·tan(α_min).
+    Fragility(fragility::FragilityArgs),
+}
 
 /// Runs a parsed command line.
 ///
@@ -25,7 +31,9 @@ pub enum Command {}
 /// Whatever the subcommand reports; the message names the file, line or key at fault.
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     init_logging(&cli.log);
-    match cli.command {}
+    match cli.command {
+        Command::Fragility(args) => fragility::run(args),
+    }
 }
 
 fn init_logging(level: &str) {

@@ -49,7 +49,7 @@ pub(crate) fn integrate(solid: &Solid) -> Result<VolumeIntegrals, FragilityError
         second += m2;
     }
     let diagonal = (hi - lo).norm();
-    if !(volume6 > 1e-12 * diagonal.powi(3)) {
+    if volume6.is_nan() || volume6 <= 1e-12 * diagonal.powi(3) {
         return Err(FragilityError::Degenerate(format!(
             "the closed surface encloses no positive volume ({} m³)",
             volume6 / 6.0

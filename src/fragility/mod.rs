@@ -195,7 +195,7 @@ impl FragilityConfig {
             "uncertainty.mesh_noise_sigma_m",
             self.uncertainty.mesh_noise_sigma_m,
         )?;
-        if self.azimuth_count < 4 || self.azimuth_count % 2 != 0 {
+        if self.azimuth_count < 4 || !self.azimuth_count.is_multiple_of(2) {
             return Err(invalid(
                 "azimuth_count",
                 self.azimuth_count,
@@ -385,7 +385,7 @@ pub(crate) fn evaluate(
     let (z_min, z_max) = rock
         .z_range()
         .ok_or(FragilityError::EmptyMesh { mesh: "rock" })?;
-    if !(h < z_max) || !h.is_finite() {
+    if !h.is_finite() || h >= z_max {
         return Err(FragilityError::ContactOutsideRock {
             contact_height_m: h,
             z_min_m: z_min,
@@ -694,3 +694,5 @@ pub fn cut_and_close(
 pub(crate) fn azimuth_direction(azimuth_rad: f64) -> Vector2<f64> {
     rocking::direction(azimuth_rad)
 }
+#[cfg(test)]
+mod real_rock;

@@ -242,7 +242,7 @@ fn orient_shells(solid: &mut Solid, which: &'static str) -> Result<usize, Fragil
     }
     let total: f64 = volume6.iter().map(|v| v.abs()).sum();
     let diagonal = (hi - lo).norm();
-    if !(total > 1e-12 * diagonal.powi(3)) {
+    if total.is_nan() || total <= 1e-12 * diagonal.powi(3) {
         return Err(FragilityError::Degenerate(format!(
             "{which} mesh encloses no volume (flat or collapsed surface)"
         )));
