@@ -59,6 +59,12 @@ pub enum DatasetError {
         /// What is wrong.
         message: String,
     },
+    /// A TUM trajectory file that cannot be read or written (names the file and line).
+    #[error(transparent)]
+    Trajectory(#[from] scarp_export::tum::TumError),
+    /// A file that cannot be written atomically (names the file).
+    #[error(transparent)]
+    Write(#[from] scarp_export::atomic::AtomicWriteError),
     /// A geometry-core error.
     #[error(transparent)]
     Geometry(#[from] scarp_slam::SlamError),

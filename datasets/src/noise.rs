@@ -40,7 +40,11 @@ pub fn value_noise_2d(seed: u64, x: f64, y: f64) -> f32 {
     let (xi, yi) = (xf as i64, yf as i64);
     let (tx, ty) = (smooth((x - xf) as f32), smooth((y - yf) as f32));
     let a = lerp(lattice(seed, xi, yi, 0), lattice(seed, xi + 1, yi, 0), tx);
-    let b = lerp(lattice(seed, xi, yi + 1, 0), lattice(seed, xi + 1, yi + 1, 0), tx);
+    let b = lerp(
+        lattice(seed, xi, yi + 1, 0),
+        lattice(seed, xi + 1, yi + 1, 0),
+        tx,
+    );
     lerp(a, b, ty)
 }
 
@@ -71,7 +75,12 @@ pub fn value_noise_3d(seed: u64, x: f64, y: f64, z: f64) -> f32 {
 pub fn fbm_2d(seed: u64, x: f64, y: f64, wavelength: f64, octaves: u32) -> f32 {
     let (mut sum, mut amplitude, mut total, mut frequency) = (0.0, 1.0, 0.0, 1.0 / wavelength);
     for octave in 0..octaves {
-        sum += amplitude * value_noise_2d(derive_seed(seed, u64::from(octave)), x * frequency, y * frequency);
+        sum += amplitude
+            * value_noise_2d(
+                derive_seed(seed, u64::from(octave)),
+                x * frequency,
+                y * frequency,
+            );
         total += amplitude;
         amplitude *= 0.5;
         frequency *= 2.0;

@@ -79,18 +79,43 @@ pub struct Contact {
 pub fn icosphere(level: u32) -> TriangleMesh {
     let t = (1.0 + 5f32.sqrt()) / 2.0;
     let mut positions: Vec<Point3<f32>> = [
-        (-1.0, t, 0.0), (1.0, t, 0.0), (-1.0, -t, 0.0), (1.0, -t, 0.0),
-        (0.0, -1.0, t), (0.0, 1.0, t), (0.0, -1.0, -t), (0.0, 1.0, -t),
-        (t, 0.0, -1.0), (t, 0.0, 1.0), (-t, 0.0, -1.0), (-t, 0.0, 1.0),
+        (-1.0, t, 0.0),
+        (1.0, t, 0.0),
+        (-1.0, -t, 0.0),
+        (1.0, -t, 0.0),
+        (0.0, -1.0, t),
+        (0.0, 1.0, t),
+        (0.0, -1.0, -t),
+        (0.0, 1.0, -t),
+        (t, 0.0, -1.0),
+        (t, 0.0, 1.0),
+        (-t, 0.0, -1.0),
+        (-t, 0.0, 1.0),
     ]
     .iter()
     .map(|&(x, y, z)| Point3::from(Vector3::new(x, y, z).normalize()))
     .collect();
     let mut faces: Vec<[u32; 3]> = vec![
-        [0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11],
-        [1, 5, 9], [5, 11, 4], [11, 10, 2], [10, 7, 6], [7, 1, 8],
-        [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8], [3, 8, 9],
-        [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1],
+        [0, 11, 5],
+        [0, 5, 1],
+        [0, 1, 7],
+        [0, 7, 10],
+        [0, 10, 11],
+        [1, 5, 9],
+        [5, 11, 4],
+        [11, 10, 2],
+        [10, 7, 6],
+        [7, 1, 8],
+        [3, 9, 4],
+        [3, 4, 2],
+        [3, 2, 6],
+        [3, 6, 8],
+        [3, 8, 9],
+        [4, 9, 5],
+        [2, 4, 11],
+        [6, 2, 10],
+        [8, 6, 7],
+        [9, 8, 1],
     ];
     for _ in 0..level {
         let mut midpoints: HashMap<(u32, u32), u32> = HashMap::new();
@@ -126,13 +151,22 @@ impl BoulderShape {
     /// lumps could fold the surface) or a subdivision level outside 1–6.
     pub fn mesh(&self, key: &str) -> Result<TriangleMesh, DatasetError> {
         if !self.radii_m.iter().all(|&r| r > 0.0 && r.is_finite()) {
-            return Err(DatasetError::invalid(format!("{key}.radii_m"), "radii must be positive"));
+            return Err(DatasetError::invalid(
+                format!("{key}.radii_m"),
+                "radii must be positive",
+            ));
         }
         if !(0.0..=0.4).contains(&self.roughness) {
-            return Err(DatasetError::invalid(format!("{key}.roughness"), "must lie in [0, 0.4]"));
+            return Err(DatasetError::invalid(
+                format!("{key}.roughness"),
+                "must lie in [0, 0.4]",
+            ));
         }
         if !(1..=6).contains(&self.subdivisions) {
-            return Err(DatasetError::invalid(format!("{key}.subdivisions"), "must lie in 1..=6"));
+            return Err(DatasetError::invalid(
+                format!("{key}.subdivisions"),
+                "must lie in 1..=6",
+            ));
         }
         let mut mesh = icosphere(self.subdivisions);
         let radii = Vector3::from(self.radii_m);
@@ -159,18 +193,30 @@ impl PedestalShape {
             ("top_radius_m", self.top_radius_m),
         ] {
             if !(value > 0.0 && value.is_finite()) {
-                return Err(DatasetError::invalid(format!("{key}.{field}"), "must be positive"));
+                return Err(DatasetError::invalid(
+                    format!("{key}.{field}"),
+                    "must be positive",
+                ));
             }
         }
         if !(self.embed_m >= 0.0) {
-            return Err(DatasetError::invalid(format!("{key}.embed_m"), "must be ≥ 0"));
+            return Err(DatasetError::invalid(
+                format!("{key}.embed_m"),
+                "must be ≥ 0",
+            ));
         }
         Ok(())
     }
 
     /// The pedestal as a closed mesh: a column from `foot_z_m − embed_m` up to a flat top at
     /// `top_z_m`, centred on (x, y), with an irregular (seeded) outline. World metres.
-    pub fn mesh(&self, centre_xy_m: [f64; 2], foot_z_m: f64, top_z_m: f64, seed: u64) -> TriangleMesh {
+    pub fn mesh(
+        &self,
+        centre_xy_m: [f64; 2],
+        foot_z_m: f64,
+        top_z_m: f64,
+        seed: u64,
+    ) -> TriangleMesh {
         const SEGMENTS: usize = 40;
         const RINGS: usize = 12;
         let bottom_z = foot_z_m - self.embed_m;
@@ -179,12 +225,14 @@ impl PedestalShape {
             let s = ring as f64 / RINGS as f64;
             let z = bottom_z + s * (top_z_m - bottom_z);
             // A concave profile: the column narrows quickly and then stays slim up to the top.
-            let radius = self.top_radius_m + (self.base_radius_m - self.top_radius_m) * (1.0 - s).powi(2);
+            let radius =
+                self.top_radius_m + (self.base_radius_m - self.top_radius_m) * (1.0 - s).powi(2);
             for k in 0..SEGMENTS {
                 let theta = k as f64 / SEGMENTS as f64 * std::f64::consts::TAU;
                 let (dx, dy) = (theta.cos(), theta.sin());
                 // Irregularity fades out at the top so the top stays a clean disc.
-                let wobble = 1.0 + 0.12 * (1.0 - s) * f64::from(fbm_3d(seed, 2.0 * dx, 2.0 * dy, z, 0.8, 3));
+                let wobble =
+                    1.0 + 0.12 * (1.0 - s) * f64::from(fbm_3d(seed, 2.0 * dx, 2.0 * dy, z, 0.8, 3));
                 mesh.positions.push(Point3::new(
                     (centre_xy_m[0] + radius * wobble * dx) as f32,
                     (centre_xy_m[1] + radius * wobble * dy) as f32,
@@ -203,11 +251,20 @@ impl PedestalShape {
         }
         // Caps: fans around centre vertices.
         let top_centre = mesh.positions.len() as u32;
-        mesh.positions.push(Point3::new(centre_xy_m[0] as f32, centre_xy_m[1] as f32, top_z_m as f32));
+        mesh.positions.push(Point3::new(
+            centre_xy_m[0] as f32,
+            centre_xy_m[1] as f32,
+            top_z_m as f32,
+        ));
         let bottom_centre = top_centre + 1;
-        mesh.positions.push(Point3::new(centre_xy_m[0] as f32, centre_xy_m[1] as f32, bottom_z as f32));
+        mesh.positions.push(Point3::new(
+            centre_xy_m[0] as f32,
+            centre_xy_m[1] as f32,
+            bottom_z as f32,
+        ));
         for k in 0..SEGMENTS {
-            mesh.faces.push([top_centre, idx(RINGS, k), idx(RINGS, k + 1)]);
+            mesh.faces
+                .push([top_centre, idx(RINGS, k), idx(RINGS, k + 1)]);
             mesh.faces.push([bottom_centre, idx(0, k + 1), idx(0, k)]);
         }
         mesh
@@ -222,12 +279,19 @@ impl PedestalShape {
 ///
 /// # Errors
 /// [`DatasetError::Invalid`] when the mesh is empty or the radius is not positive.
-pub fn seat_on_flat_contact(mut mesh: TriangleMesh, contact_radius_m: f64, key: &str) -> Result<(TriangleMesh, Contact), DatasetError> {
+pub fn seat_on_flat_contact(
+    mut mesh: TriangleMesh,
+    contact_radius_m: f64,
+    key: &str,
+) -> Result<(TriangleMesh, Contact), DatasetError> {
     let (lo, hi) = mesh
         .bounds()
         .ok_or_else(|| DatasetError::invalid(key, "rock mesh is empty"))?;
     if !(contact_radius_m > 0.0) {
-        return Err(DatasetError::invalid(format!("{key}.contact_radius_m"), "must be positive"));
+        return Err(DatasetError::invalid(
+            format!("{key}.contact_radius_m"),
+            "must be positive",
+        ));
     }
     let z_min = f64::from(lo.z);
     let height = f64::from(hi.z - lo.z);
@@ -242,7 +306,9 @@ pub fn seat_on_flat_contact(mut mesh: TriangleMesh, contact_radius_m: f64, key: 
         if pts.len() < 3 {
             return 0.0;
         }
-        let centre = pts.iter().fold(Point2::origin(), |c, p| c + p.coords / pts.len() as f64);
+        let centre = pts
+            .iter()
+            .fold(Point2::origin(), |c, p| c + p.coords / pts.len() as f64);
         pts.iter().map(|p| (p - centre).norm()).fold(0.0, f64::max)
     };
     // Bisection on the cut depth: the flattened radius grows with depth.
@@ -259,10 +325,15 @@ pub fn seat_on_flat_contact(mut mesh: TriangleMesh, contact_radius_m: f64, key: 
     let flat = below(cut);
     let hull = convex_hull_2d(&flat);
     if hull.len() < 3 {
-        return Err(DatasetError::invalid(key, "rock bottom gives no contact polygon"));
+        return Err(DatasetError::invalid(
+            key,
+            "rock bottom gives no contact polygon",
+        ));
     }
     let area = polygon_signed_area(&hull);
-    let centre = hull.iter().fold(Point2::origin(), |c, p| c + p.coords / hull.len() as f64);
+    let centre = hull
+        .iter()
+        .fold(Point2::origin(), |c, p| c + p.coords / hull.len() as f64);
     for p in &mut mesh.positions {
         let z = f64::from(p.z).max(cut);
         *p = Point3::new(
@@ -273,7 +344,10 @@ pub fn seat_on_flat_contact(mut mesh: TriangleMesh, contact_radius_m: f64, key: 
     }
     let contact = Contact {
         height_m: 0.0,
-        polygon_xy_m: hull.iter().map(|p| [p.x - centre.x, p.y - centre.y]).collect(),
+        polygon_xy_m: hull
+            .iter()
+            .map(|p| [p.x - centre.x, p.y - centre.y])
+            .collect(),
         area_m2: area,
     };
     Ok((mesh, contact))
@@ -297,8 +371,19 @@ mod tests {
         let m = BoulderShape::default().mesh("rock").unwrap();
         let v = m.volume_properties().unwrap();
         let ellipsoid = 4.0 / 3.0 * std::f64::consts::PI * 0.8 * 0.6 * 0.7;
-        assert!((v.volume_m3 / ellipsoid - 1.0).abs() < 0.25, "{}", v.volume_m3);
-        assert!(BoulderShape { roughness: 0.9, ..Default::default() }.mesh("rock").is_err());
+        assert!(
+            (v.volume_m3 / ellipsoid - 1.0).abs() < 0.25,
+            "{}",
+            v.volume_m3
+        );
+        assert!(
+            BoulderShape {
+                roughness: 0.9,
+                ..Default::default()
+            }
+            .mesh("rock")
+            .is_err()
+        );
     }
 
     #[test]
@@ -309,7 +394,11 @@ mod tests {
         assert!(lo.z.abs() < 1e-6);
         // A disc of radius ~0.15 m: the hull area is within a factor of that disc's.
         let disc = std::f64::consts::PI * 0.15 * 0.15;
-        assert!(contact.area_m2 > 0.3 * disc && contact.area_m2 < 1.3 * disc, "{}", contact.area_m2);
+        assert!(
+            contact.area_m2 > 0.3 * disc && contact.area_m2 < 1.3 * disc,
+            "{}",
+            contact.area_m2
+        );
         assert!(seated.volume_properties().unwrap().volume_m3 > 0.0);
     }
 

@@ -139,7 +139,9 @@ impl Heightfield {
             (gy.floor() as usize).min(self.ny.saturating_sub(2)),
         );
         let (fx, fy) = (gx - i as f64, gy - j as f64);
-        let h = |di, dj| f64::from(self.sample((i + di).min(self.nx - 1), (j + dj).min(self.ny - 1)));
+        let h = |di: usize, dj: usize| {
+            f64::from(self.sample((i + di).min(self.nx - 1), (j + dj).min(self.ny - 1)))
+        };
         let south = h(0, 0) + (h(1, 0) - h(0, 0)) * fx;
         let north = h(0, 1) + (h(1, 1) - h(0, 1)) * fx;
         Some(south + (north - south) * fy)
@@ -159,7 +161,9 @@ impl Heightfield {
     pub fn height_range(&self) -> (f32, f32) {
         self.heights_m
             .iter()
-            .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &h| (lo.min(h), hi.max(h)))
+            .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &h| {
+                (lo.min(h), hi.max(h))
+            })
     }
 
     /// The terrain as a triangle mesh in world coordinates, two triangles a cell, wound
@@ -176,13 +180,16 @@ impl Heightfield {
                     (self.origin_y_m + j as f64 * self.spacing_m) as f32,
                     self.sample(i, j),
                 ));
-                let dzdx = (self.sample((i + 1).min(nx - 1), j) - self.sample(i.saturating_sub(1), j))
+                let dzdx = (self.sample((i + 1).min(nx - 1), j)
+                    - self.sample(i.saturating_sub(1), j))
                     / (((i + 1).min(nx - 1) - i.saturating_sub(1)).max(1) as f64 * self.spacing_m)
                         as f32;
-                let dzdy = (self.sample(i, (j + 1).min(ny - 1)) - self.sample(i, j.saturating_sub(1)))
+                let dzdy = (self.sample(i, (j + 1).min(ny - 1))
+                    - self.sample(i, j.saturating_sub(1)))
                     / (((j + 1).min(ny - 1) - j.saturating_sub(1)).max(1) as f64 * self.spacing_m)
                         as f32;
-                mesh.normals.push(Vector3::new(-dzdx, -dzdy, 1.0).normalize());
+                mesh.normals
+                    .push(Vector3::new(-dzdx, -dzdy, 1.0).normalize());
             }
         }
         for j in 0..ny.saturating_sub(1) {
@@ -241,8 +248,14 @@ fn parse_esri_ascii(text: &str) -> Result<Heightfield, (usize, String)> {
             .ok_or_else(|| (1, format!("missing header key `{key}`")))
     };
     let (ncols, nrows, cellsize) = (get("ncols")?, get("nrows")?, get("cellsize")?);
-    if !(ncols >= 2.0 && nrows >= 2.0 && ncols * nrows <= 16e6) || ncols.fract() != 0.0 || nrows.fract() != 0.0 {
-        return Err((1, format!("ncols {ncols} and nrows {nrows} must be integers ≥ 2 (≤ 16 M cells)")));
+    if !(ncols >= 2.0 && nrows >= 2.0 && ncols * nrows <= 16e6)
+        || ncols.fract() != 0.0
+        || nrows.fract() != 0.0
+    {
+        return Err((
+            1,
+            format!("ncols {ncols} and nrows {nrows} must be integers ≥ 2 (≤ 16 M cells)"),
+        ));
     }
     if !(cellsize > 0.0 && cellsize.is_finite()) {
         return Err((1, format!("cellsize {cellsize} must be positive")));
@@ -263,7 +276,11 @@ fn parse_esri_ascii(text: &str) -> Result<Heightfield, (usize, String)> {
     if values.len() != nx * ny {
         return Err((
             last_line,
-            format!("expected {} heights ({nrows}×{ncols}), found {}", nx * ny, values.len()),
+            format!(
+                "expected {} heights ({nrows}×{ncols}), found {}",
+                nx * ny,
+                values.len()
+            ),
         ));
     }
     let is_valid = |v: f64| v.is_finite() && nodata.is_none_or(|nd| v != nd);
@@ -313,17 +330,30 @@ mod tests {
 
     #[test]
     fn esri_grid_errors_name_the_line() {
-        let (line, msg) = parse_esri_ascii("ncols 2\nnrows 2\nxllcorner 0\nyllcorner 0\ncellsize 1\n1 2\n3 x\n").unwrap_err();
+        let (line, msg) =
+            parse_esri_ascii("ncols 2\nnrows 2\nxllcorner 0\nyllcorner 0\ncellsize 1\n1 2\n3 x\n")
+                .unwrap_err();
         assert_eq!(line, 7);
         assert!(msg.contains("`x`"));
         let (_, msg) = parse_esri_ascii("ncols 2\nnrows 2\ncellsize 1\n1 2\n3\n").unwrap_err();
         assert!(msg.contains("expected 4 heights"));
-        assert!(parse_esri_ascii("nrows 2\ncellsize 1\n").unwrap_err().1.contains("ncols"));
+        assert!(
+            parse_esri_ascii("nrows 2\ncellsize 1\n")
+                .unwrap_err()
+                .1
+                .contains("ncols")
+        );
     }
 
     #[test]
     fn procedural_terrain_has_a_scarp_and_a_consistent_mesh() {
-        let t = ProceduralTerrain { size_m: 40.0, resolution_m: 1.0, roughness_m: 0.0, scarp_offset_m: 0.0, ..Default::default() };
+        let t = ProceduralTerrain {
+            size_m: 40.0,
+            resolution_m: 1.0,
+            roughness_m: 0.0,
+            scarp_offset_m: 0.0,
+            ..Default::default()
+        };
         let h = t.generate().unwrap();
         assert_eq!((h.nx, h.ny), (41, 41));
         // Far across the trace the offset approaches the full scarp height.

@@ -1,7 +1,6 @@
 //! TUM trajectory files: one pose a line, `timestamp tx ty tz qx qy qz qw`, `#` comments.
 //! Each pose is `world_from_camera` (metres, Hamilton quaternion).
 
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use nalgebra::Isometry3;
@@ -29,6 +28,9 @@ pub enum TumError {
         #[source]
         source: std::io::Error,
     },
+    /// The file could not be written.
+    #[error(transparent)]
+    Write(#[from] crate::atomic::AtomicWriteError),
     /// A bad line: wrong field count, a bad number, a bad quaternion, or a timestamp that does
     /// not increase.
     #[error("{}:{line}: {message}", path.display())]
@@ -138,19 +140,15 @@ pub fn format_tum_trajectory(poses: &[StampedPose], comment: &str) -> String {
 /// Writes poses to a TUM trajectory file, atomically.
 ///
 /// # Errors
-/// [`TumError::Io`] naming the file.
+/// [`TumError::Write`] naming the file.
 pub fn write_tum_trajectory(
     path: &Path,
     poses: &[StampedPose],
     comment: &str,
 ) -> Result<(), TumError> {
     let text = format_tum_trajectory(poses, comment);
-    crate::atomic::write_atomically(path, |w| w.write_all(text.as_bytes())).map_err(|source| {
-        TumError::Io {
-            path: path.to_path_buf(),
-            source,
-        }
-    })
+    crate::atomic::write_bytes_atomically(path, text.as_bytes())?;
+    Ok(())
 }
 
 #[cfg(test)]

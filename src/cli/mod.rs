@@ -2,8 +2,12 @@
 //! `run` function.
 
 pub mod fragility;
+pub mod render;
+pub mod simulate;
+pub mod world;
 
 use clap::{Parser, Subcommand};
+use indicatif::{ProgressBar, ProgressStyle};
 
 /// Find, localize and map precariously balanced rocks with a small drone.
 #[derive(Debug, Parser)]
@@ -23,6 +27,12 @@ pub enum Command {
     /// Fragility of a rock mesh: contact, mass properties, rocking angles α(θ), α_min and the
     /// toppling acceleration g·tan(α_min).
     Fragility(fragility::FragilityArgs),
+    /// Run the simulated mission on a world (the main job).
+    Simulate(simulate::SimulateArgs),
+    /// Render a camera path through a world into a TUM RGB-D sequence.
+    Render(render::RenderArgs),
+    /// Write a world's ground-truth meshes and `world.json`.
+    World(world::WorldArgs),
 }
 
 /// Runs a parsed command line.
@@ -33,7 +43,20 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
     init_logging(&cli.log);
     match cli.command {
         Command::Fragility(args) => fragility::run(args),
+        Command::Simulate(args) => simulate::run(args),
+        Command::Render(args) => render::run(args),
+        Command::World(args) => world::run(args),
     }
+}
+
+/// A progress bar on a terminal; hidden when stderr is not one (CI, pipes).
+pub fn progress_bar(length: u64, message: &'static str) -> ProgressBar {
+    let bar = ProgressBar::new(length);
+    if let Ok(style) = ProgressStyle::with_template("{msg} [{bar:40}] {pos}/{len} ({eta})") {
+        bar.set_style(style.progress_chars("=> "));
+    }
+    bar.set_message(message);
+    bar
 }
 
 fn init_logging(level: &str) {

@@ -1,0 +1,173 @@
+//! A state-estimator model: what a GPS/IMU filter would report for the camera pose.
+//!
+//! Position error per axis is a first-order Gauss–Markov process (a random walk pulled back
+//! toward zero with correlation time τ, so its spread stays at the configured σ) plus white
+//! noise. Attitude error is the same kind of process on roll, pitch and yaw, applied about the
+//! world axes: `R_est = Rz(δyaw)·Ry(δpitch)·Rx(δroll)·R_true`.
+
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use rand::SeedableRng;
+use rand::rngs::Xoshiro256PlusPlus;
+use rand_distr::{Distribution, StandardNormal};
+use scarp_export::tum::StampedPose;
+use serde::{Deserialize, Serialize};
+
+/// Noise levels of the state estimator.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct EstimatorConfig {
+    /// Stationary σ of the horizontal GPS random walk, metres per axis. Default 0.5.
+    pub horizontal_sigma_m: f64,
+    /// Stationary σ of the vertical GPS random walk, metres. Default 0.8.
+    pub vertical_sigma_m: f64,
+    /// Correlation time of the position walk, seconds. Default 30.
+    pub position_correlation_s: f64,
+    /// White position noise per sample, horizontal, metres. Default 0.02.
+    pub horizontal_white_m: f64,
+    /// White position noise per sample, vertical, metres. Default 0.03.
+    pub vertical_white_m: f64,
+    /// Stationary σ of roll and pitch errors, degrees. Default 0.5.
+    pub roll_pitch_sigma_deg: f64,
+    /// Stationary σ of the yaw error, degrees. Default 2.0.
+    pub yaw_sigma_deg: f64,
+    /// Correlation time of the attitude errors, seconds. Default 10.
+    pub attitude_correlation_s: f64,
+}
+
+impl Default for EstimatorConfig {
+    fn default() -> Self {
+        Self {
+            horizontal_sigma_m: 0.5,
+            vertical_sigma_m: 0.8,
+            position_correlation_s: 30.0,
+            horizontal_white_m: 0.02,
+            vertical_white_m: 0.03,
+            roll_pitch_sigma_deg: 0.5,
+            yaw_sigma_deg: 2.0,
+            attitude_correlation_s: 10.0,
+        }
+    }
+}
+
+/// A first-order Gauss–Markov process with stationary σ and correlation time τ.
+#[derive(Debug, Clone, Copy)]
+struct GaussMarkov {
+    sigma: f64,
+    tau_s: f64,
+    value: f64,
+}
+
+impl GaussMarkov {
+    fn new(sigma: f64, tau_s: f64, rng: &mut Xoshiro256PlusPlus) -> Self {
+        let draw: f64 = StandardNormal.sample(rng);
+        Self {
+            sigma,
+            tau_s,
+            value: sigma * draw,
+        }
+    }
+
+    fn step(&mut self, dt_s: f64, rng: &mut Xoshiro256PlusPlus) -> f64 {
+        let phi = (-dt_s.max(0.0) / self.tau_s.max(1e-9)).exp();
+        let draw: f64 = StandardNormal.sample(rng);
+        self.value = phi * self.value + (1.0 - phi * phi).sqrt() * self.sigma * draw;
+        self.value
+    }
+}
+
+impl EstimatorConfig {
+    /// The estimated poses for a true trajectory (same timestamps), from seed `seed`.
+    pub fn estimate(&self, truth: &[StampedPose], seed: u64) -> Vec<StampedPose> {
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
+        let mut walks = [
+            GaussMarkov::new(
+                self.horizontal_sigma_m,
+                self.position_correlation_s,
+                &mut rng,
+            ),
+            GaussMarkov::new(
+                self.horizontal_sigma_m,
+                self.position_correlation_s,
+                &mut rng,
+            ),
+            GaussMarkov::new(self.vertical_sigma_m, self.position_correlation_s, &mut rng),
+            GaussMarkov::new(
+                self.roll_pitch_sigma_deg.to_radians(),
+                self.attitude_correlation_s,
+                &mut rng,
+            ),
+            GaussMarkov::new(
+                self.roll_pitch_sigma_deg.to_radians(),
+                self.attitude_correlation_s,
+                &mut rng,
+            ),
+            GaussMarkov::new(
+                self.yaw_sigma_deg.to_radians(),
+                self.attitude_correlation_s,
+                &mut rng,
+            ),
+        ];
+        let white = [
+            self.horizontal_white_m,
+            self.horizontal_white_m,
+            self.vertical_white_m,
+        ];
+        let mut previous_t = truth.first().map_or(0.0, |p| p.timestamp_s);
+        truth
+            .iter()
+            .map(|pose| {
+                let dt = pose.timestamp_s - previous_t;
+                previous_t = pose.timestamp_s;
+                let e: Vec<f64> = walks.iter_mut().map(|w| w.step(dt, &mut rng)).collect();
+                let noise: [f64; 3] = std::array::from_fn(|k| {
+                    let draw: f64 = StandardNormal.sample(&mut rng);
+                    white[k] * draw
+                });
+                let position_error =
+                    Vector3::new(e[0] + noise[0], e[1] + noise[1], e[2] + noise[2]);
+                let attitude_error = UnitQuaternion::from_euler_angles(e[3], e[4], e[5]);
+                let truth_pose = pose.world_from_camera;
+                StampedPose {
+                    timestamp_s: pose.timestamp_s,
+                    world_from_camera: Isometry3::from_parts(
+                        Translation3::from(truth_pose.translation.vector + position_error),
+                        attitude_error * truth_pose.rotation,
+                    ),
+                }
+            })
+            .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn error_spread_matches_configuration() {
+        let config = EstimatorConfig {
+            position_correlation_s: 0.5,
+            attitude_correlation_s: 0.5,
+            ..Default::default()
+        };
+        let truth: Vec<StampedPose> = (0..20_000)
+            .map(|k| StampedPose {
+                timestamp_s: k as f64 * 0.05,
+                world_from_camera: Isometry3::identity(),
+            })
+            .collect();
+        let est = config.estimate(&truth, 3);
+        let n = est.len() as f64;
+        let rms = |f: &dyn Fn(&StampedPose) -> f64| {
+            (est.iter().map(|p| f(p).powi(2)).sum::<f64>() / n).sqrt()
+        };
+        let x = rms(&|p| p.world_from_camera.translation.x);
+        let z = rms(&|p| p.world_from_camera.translation.z);
+        let expected_x = (0.5f64.powi(2) + 0.02f64.powi(2)).sqrt();
+        assert!((x / expected_x - 1.0).abs() < 0.1, "x rms {x}");
+        assert!((z / 0.8 - 1.0).abs() < 0.1, "z rms {z}");
+        let yaw = rms(&|p| p.world_from_camera.rotation.euler_angles().2.to_degrees());
+        assert!((yaw / 2.0 - 1.0).abs() < 0.1, "yaw rms {yaw}");
+        assert_eq!(est, config.estimate(&truth, 3));
+    }
+}

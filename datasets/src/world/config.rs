@@ -1,0 +1,205 @@
+//! The world file schema (`world.toml`). See the crate docs for a full example.
+
+use serde::{Deserialize, Serialize};
+
+use crate::rock::{BoulderShape, PedestalShape};
+use crate::terrain::ProceduralTerrain;
+
+/// A whole world file.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WorldConfig {
+    /// A name for reports.
+    #[serde(default = "default_name")]
+    pub name: String,
+    /// The geodetic position of the local ENU origin.
+    #[serde(default)]
+    pub origin: GeodeticOrigin,
+    /// Lighting.
+    #[serde(default)]
+    pub sun: Sun,
+    /// Surface texture.
+    #[serde(default)]
+    pub texture: TextureConfig,
+    /// Terrain source.
+    pub terrain: TerrainConfig,
+    /// Rocks, targets and distractors.
+    #[serde(default)]
+    pub rocks: Vec<RockConfig>,
+}
+
+fn default_name() -> String {
+    "world".into()
+}
+
+/// WGS84 position of the world origin, for geo-referencing outputs.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GeodeticOrigin {
+    /// Latitude, degrees north.
+    pub lat_deg: f64,
+    /// Longitude, degrees east.
+    pub lon_deg: f64,
+    /// Ellipsoidal altitude, metres.
+    pub alt_m: f64,
+}
+
+impl Default for GeodeticOrigin {
+    /// A granite PBR field in southern California (Granite Pass, near the San Jacinto fault).
+    fn default() -> Self {
+        Self {
+            lat_deg: 33.584,
+            lon_deg: -116.428,
+            alt_m: 1280.0,
+        }
+    }
+}
+
+/// The sun, for Lambert shading.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Sun {
+    /// Azimuth toward the sun, degrees clockwise from north. Default 135 (south-east).
+    pub azimuth_deg: f64,
+    /// Elevation above the horizon, degrees. Default 50.
+    pub elevation_deg: f64,
+    /// Ambient (sky) light as a fraction of full light, in [0, 1]. Default 0.35.
+    pub ambient: f64,
+}
+
+impl Default for Sun {
+    fn default() -> Self {
+        Self {
+            azimuth_deg: 135.0,
+            elevation_deg: 50.0,
+            ambient: 0.35,
+        }
+    }
+}
+
+/// Procedural surface texture: albedo = base colour modulated by fractal noise.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TextureConfig {
+    /// Seed of the texture noise.
+    pub seed: u64,
+    /// Texel size of the baked terrain albedo map, metres. Default 0.04.
+    pub terrain_texel_m: f64,
+    /// Terrain base colour, sRGB. Default a sandy grus.
+    pub terrain_color: [u8; 3],
+    /// Secondary terrain colour (darker patches, vegetation), sRGB.
+    pub terrain_patch_color: [u8; 3],
+    /// Rock base colour, sRGB. Default a light granite grey.
+    pub rock_color: [u8; 3],
+    /// Pedestal base colour, sRGB.
+    pub pedestal_color: [u8; 3],
+    /// Strength of the fine speckle (grain) modulation, in [0, 1]. Default 0.35.
+    pub speckle: f64,
+    /// Wavelength of the coarse colour variation, metres. Default 0.6.
+    pub variation_wavelength_m: f64,
+    /// Wavelength of the fine speckle, metres. Default 0.03.
+    pub speckle_wavelength_m: f64,
+}
+
+impl Default for TextureConfig {
+    fn default() -> Self {
+        Self {
+            seed: 11,
+            terrain_texel_m: 0.04,
+            terrain_color: [196, 170, 130],
+            terrain_patch_color: [112, 110, 80],
+            rock_color: [170, 165, 158],
+            pedestal_color: [150, 132, 110],
+            speckle: 0.35,
+            variation_wavelength_m: 0.6,
+            speckle_wavelength_m: 0.03,
+        }
+    }
+}
+
+/// Where the terrain comes from: a `[terrain.procedural]` or a `[terrain.dem]` table.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TerrainConfig {
+    /// A procedural fault scarp.
+    Procedural(ProceduralTerrain),
+    /// An ESRI ASCII grid file.
+    Dem(DemTerrain),
+}
+
+/// A DEM file.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DemTerrain {
+    /// Path to the `.asc` grid, relative to the world file.
+    pub path: String,
+}
+
+/// Whether a rock is something to map or a decoy.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RockRole {
+    /// A precariously balanced rock to find, localize and map.
+    Target,
+    /// An ordinary boulder that must not be mapped.
+    Distractor,
+}
+
+impl RockRole {
+    /// `target` or `distractor`.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Target => "target",
+            Self::Distractor => "distractor",
+        }
+    }
+}
+
+/// A rock's shape: `shape = { mesh = "file.ply" }` or `shape = { boulder = { … } }`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RockShape {
+    /// A mesh file (PLY or OBJ), relative to the world file, or `builtin:double_rock` for the
+    /// scanned PBR shipped with scarp.
+    Mesh(String),
+    /// A procedural boulder.
+    Boulder(BoulderShape),
+}
+
+/// One rock.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RockConfig {
+    /// Unique id, 1–999 (it also sets the rock's instance id in masks).
+    pub id: u32,
+    /// Target or distractor.
+    pub role: RockRole,
+    /// Position of the rock's base (the pedestal axis, or the rock's contact) in world x, y,
+    /// metres. z follows from the terrain.
+    pub position_m: [f64; 2],
+    /// Rotation about the vertical axis, degrees counter-clockwise seen from above.
+    #[serde(default)]
+    pub yaw_deg: f64,
+    /// Rock height after scaling, metres. The mesh is scaled uniformly to this height.
+    pub height_m: f64,
+    /// The shape.
+    pub shape: RockShape,
+    /// The pedestal; without one the rock rests on the terrain.
+    #[serde(default)]
+    pub pedestal: Option<PedestalShape>,
+    /// Radius of the flat basal contact, metres. Default 0.15.
+    #[serde(default = "default_contact_radius")]
+    pub contact_radius_m: f64,
+    /// How far a rock without a pedestal sinks into the terrain, as a fraction of its height.
+    /// Default 0.1.
+    #[serde(default = "default_embed_fraction")]
+    pub embed_fraction: f64,
+}
+
+fn default_contact_radius() -> f64 {
+    0.15
+}
+
+fn default_embed_fraction() -> f64 {
+    0.1
+}
