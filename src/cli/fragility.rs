@@ -12,7 +12,7 @@ use crate::fragility::{
 /// Arguments of `scarp fragility`.
 #[derive(Debug, clap::Args)]
 pub struct FragilityArgs {
-    /// Closed rock mesh, metres (OBJ).
+    /// Closed rock mesh, metres (PLY or OBJ).
     pub mesh: PathBuf,
     /// Up direction in the mesh's frame as `x,y,z` (default `0,0,1`, or the config file's).
     #[arg(long, value_parser = parse_vector, allow_hyphen_values = true)]
@@ -62,10 +62,12 @@ fn read_mesh(path: &Path) -> anyhow::Result<TriangleMesh> {
         .map(|e| e.to_string_lossy().to_ascii_lowercase())
         .unwrap_or_default();
     match ext.as_str() {
+        "ply" => scarp_export::ply::read_mesh(path)
+            .with_context(|| format!("reading mesh {}", path.display())),
         "obj" => scarp_export::obj::read_obj(path)
             .with_context(|| format!("reading mesh {}", path.display())),
         _ => bail!(
-            "mesh {}: unsupported format `.{ext}` (supported: .obj)",
+            "mesh {}: unsupported format `.{ext}` (supported: .ply, .obj)",
             path.display()
         ),
     }
@@ -180,7 +182,9 @@ mod tests {
             "--json",
         ])
         .unwrap();
-        let crate::cli::Command::Fragility(args) = cli.command;
+        let crate::cli::Command::Fragility(args) = cli.command else {
+            panic!("parsed as another subcommand");
+        };
         assert_eq!(args.up, Some([0.0, 0.0, -1.0]));
         assert_eq!(args.contact_height, Some(-0.25));
         assert!(args.json);
@@ -249,5 +253,24 @@ mod tests {
         };
         let e = run(missing).unwrap_err();
         assert!(format!("{e:#}").contains("missing.obj"));
+    }
+
+    #[test]
+    fn runs_on_the_real_rock_ply() {
+        let dir = tempfile::tempdir().unwrap();
+        let figure = dir.path().join("rock.png");
+        let args = FragilityArgs {
+            mesh: Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("../shared/data/rocks/double_rock.ply"),
+            up: Some([0.0, 0.0, 1.0]),
+            contact_height: Some(-0.06),
+            pedestal: None,
+            json: true,
+            figure: Some(figure.clone()),
+            config: None,
+            seed: None,
+        };
+        run(args).unwrap();
+        assert!(std::fs::metadata(figure).unwrap().len() > 1000);
     }
 }

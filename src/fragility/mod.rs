@@ -69,6 +69,8 @@ mod contact;
 mod error;
 pub mod figure;
 pub mod mass;
+#[cfg(test)]
+mod real_rock;
 pub mod rocking;
 mod section;
 #[cfg(test)]
@@ -598,7 +600,7 @@ pub fn analyze_detailed(
         contact_height_m: h,
         contact_method: method,
         contact_area_m2: rocking::polygon_area(&eval.hull),
-        section_area_m2: eval.cut.section.area(),
+        section_area_m2: eval.cut.section.area().max(0.0),
         contact_polygon: eval
             .hull
             .iter()
@@ -694,5 +696,3 @@ pub fn cut_and_close(
 pub(crate) fn azimuth_direction(azimuth_rad: f64) -> Vector2<f64> {
     rocking::direction(azimuth_rad)
 }
-#[cfg(test)]
-mod real_rock;

@@ -22,7 +22,7 @@ pub(crate) fn rock_path() -> std::path::PathBuf {
 }
 
 pub(crate) fn load_model() -> TriangleMesh {
-    scarp_export::obj::read_obj(std::path::Path::new("/tmp/double_rock.obj")).unwrap()
+    scarp_export::ply::read_mesh(rock_path()).unwrap()
 }
 
 /// The rotation that stands the model on its vertex farthest from its centre of mass: that
