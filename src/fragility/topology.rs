@@ -54,7 +54,7 @@ impl Solid {
     }
 }
 
-/// The repairs [`prepare`] made to an input mesh. All are exact: none moves a vertex.
+/// The repairs [`analyze`](super::analyze) made to an input mesh before analysing it. All are exact: none moves a vertex.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct MeshRepairs {
     /// Vertices merged into an earlier vertex at exactly the same position (meshes exported
