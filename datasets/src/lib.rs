@@ -18,6 +18,9 @@
 //! assert!(world.rocks.is_empty());
 //! ```
 
+// `!(x > 0.0)` is how this crate rejects NaN along with non-positive values, on purpose.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 pub mod error;
 pub mod estimator;
 pub mod noise;

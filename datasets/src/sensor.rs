@@ -154,7 +154,12 @@ mod tests {
                 (sigma / model - 1.0).abs() < 0.1,
                 "z={z}: measured {sigma}, model {model}"
             );
-            assert!((mean - f64::from(z)).abs() < 3.0 * model / n.sqrt() + 1e-3);
+            // Inverting a noisy disparity biases depth by about σ_z²/z (second order).
+            let expected_mean = f64::from(z) + model * model / f64::from(z);
+            assert!(
+                (mean - expected_mean).abs() < 4.0 * model / n.sqrt() + 1e-4,
+                "z={z}: mean {mean}"
+            );
         }
     }
 

@@ -78,16 +78,16 @@ pub fn parse_tum_trajectory(text: &str) -> Result<Vec<StampedPose>, (usize, Stri
         if !timestamp_s.is_finite() {
             return Err((line_no, "timestamp is not finite".into()));
         }
-        if let Some(previous) = poses.last() {
-            if timestamp_s <= previous.timestamp_s {
-                return Err((
-                    line_no,
-                    format!(
-                        "timestamp {timestamp_s} is not after the previous one ({})",
-                        previous.timestamp_s
-                    ),
-                ));
-            }
+        if let Some(previous) = poses.last()
+            && timestamp_s <= previous.timestamp_s
+        {
+            return Err((
+                line_no,
+                format!(
+                    "timestamp {timestamp_s} is not after the previous one ({})",
+                    previous.timestamp_s
+                ),
+            ));
         }
         let mut pose = [0.0; 7];
         pose.copy_from_slice(&values[1..]);

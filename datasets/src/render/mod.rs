@@ -44,6 +44,9 @@ enum Material {
     Solid([u8; 3]),
 }
 
+/// A frustum half-space: a point is inside when the value is ≥ 0.
+type FrustumPlane<'a> = &'a dyn Fn(&Point3<f64>) -> f64;
+
 /// One drawable mesh with its faces regrouped into spatial chunks for culling.
 struct Layer<'w> {
     mesh: &'w TriangleMesh,
@@ -51,8 +54,17 @@ struct Layer<'w> {
     material: Material,
     /// Faces reordered so that each chunk is a contiguous range.
     faces: Vec<[u32; 3]>,
-    /// (start, end, min, max) of each chunk.
-    chunks: Vec<(usize, usize, Point3<f64>, Point3<f64>)>,
+    /// Contiguous face ranges with their bounds.
+    chunks: Vec<Chunk>,
+}
+
+/// Faces `start..end` of a layer's reordered faces, inside the box `lo..hi` (world metres).
+#[derive(Debug, Clone, Copy)]
+struct Chunk {
+    start: usize,
+    end: usize,
+    lo: Point3<f64>,
+    hi: Point3<f64>,
 }
 
 /// A renderer bound to one world. Building it groups faces into chunks once; [`Self::render`]
@@ -62,10 +74,7 @@ pub struct Renderer<'w> {
     layers: Vec<Layer<'w>>,
 }
 
-fn chunk_faces(
-    mesh: &TriangleMesh,
-    cell_m: f64,
-) -> (Vec<[u32; 3]>, Vec<(usize, usize, Point3<f64>, Point3<f64>)>) {
+fn chunk_faces(mesh: &TriangleMesh, cell_m: f64) -> (Vec<[u32; 3]>, Vec<Chunk>) {
     let centroid = |f: &[u32; 3]| -> Point3<f64> {
         let p = f.map(|i| mesh.positions[i as usize].coords.cast::<f64>());
         Point3::from((p[0] + p[1] + p[2]) / 3.0)
@@ -94,7 +103,7 @@ fn chunk_faces(
             }
             end += 1;
         }
-        chunks.push((start, end, lo, hi));
+        chunks.push(Chunk { start, end, lo, hi });
         start = end;
     }
     (faces, chunks)
@@ -155,14 +164,7 @@ impl<'w> Renderer<'w> {
         let camera_from_world = world_from_camera.inverse();
         let triangles = self.setup(camera, &camera_from_world);
         let (winners, inv_depth) = self.rasterize(camera, &triangles);
-        Ok(self.resolve(
-            camera,
-            world_from_camera,
-            &camera_from_world,
-            &triangles,
-            &winners,
-            &inv_depth,
-        ))
+        Ok(self.resolve(camera, world_from_camera, &triangles, &winners, &inv_depth))
     }
 
     fn chunk_visible(
@@ -183,7 +185,7 @@ impl<'w> Renderer<'w> {
             .collect();
         let (w, h) = (f64::from(camera.width), f64::from(camera.height));
         // Frustum half-spaces in homogeneous form (valid for any sign of fy).
-        let planes: [&dyn Fn(&Point3<f64>) -> f64; 5] = [
+        let planes: [FrustumPlane; 5] = [
             &|p| p.z - NEAR_PLANE_M,
             &|p| camera.fx * p.x + (camera.cx + 0.5) * p.z,
             &|p| (w - 0.5 - camera.cx) * p.z - camera.fx * p.x,
@@ -209,8 +211,8 @@ impl<'w> Renderer<'w> {
                     .chunks
                     .iter()
                     .enumerate()
-                    .filter(|(_, (_, _, lo, hi))| {
-                        Self::chunk_visible(camera, camera_from_world, lo, hi)
+                    .filter(|(_, chunk)| {
+                        Self::chunk_visible(camera, camera_from_world, &chunk.lo, &chunk.hi)
                     })
                     .map(move |(c, _)| (l, c))
             })
@@ -219,7 +221,7 @@ impl<'w> Renderer<'w> {
             .par_iter()
             .map(|&(l, c)| {
                 let layer = &self.layers[l];
-                let (start, end, _, _) = layer.chunks[c];
+                let Chunk { start, end, .. } = layer.chunks[c];
                 let mut out = Vec::new();
                 for (f, face) in layer.faces[start..end].iter().enumerate() {
                     let corners = face.map(|v| {
@@ -288,89 +290,84 @@ impl<'w> Renderer<'w> {
         &self,
         camera: &PinholeCamera,
         world_from_camera: &Isometry3<f64>,
-        camera_from_world: &Isometry3<f64>,
         triangles: &[SetupTriangle],
         winners: &[u32],
         inv_depth: &[f32],
     ) -> RenderOutput {
-        let width = camera.width as usize;
+        let (w, h) = (camera.width, camera.height);
+        let width = w as usize;
         let world = self.world;
-        let sun = camera_from_world.rotation * world.sun_direction;
+        let sun = world.sun_direction;
         let ambient = world.config.sun.ambient as f32;
         let texture = &world.config.texture;
-        let pixels: Vec<([u8; 3], f32, u16)> = (0..camera.pixel_count())
-            .into_par_iter()
-            .with_min_len(width)
-            .map(|i| {
-                let (u, v) = ((i % width) as f64, (i / width) as f64);
-                let winner = winners[i];
-                let ray = Vector3::new(
-                    (u - camera.cx) / camera.fx,
-                    (v - camera.cy) / camera.fy,
-                    1.0,
-                );
-                if winner == u32::MAX {
-                    // Sky: brighter toward the horizon.
-                    let up = (world_from_camera.rotation * ray.normalize())
-                        .z
-                        .clamp(0.0, 1.0) as f32;
-                    return (
-                        [(190.0 - 70.0 * up) as u8, (210.0 - 50.0 * up) as u8, 235],
-                        0.0,
-                        0,
+        let mut rgb = RgbImage::filled(w, h, [0, 0, 0]);
+        let mut depth = DepthImage::filled(w, h, 0.0);
+        let mut instance = MaskImage::filled(w, h, 0);
+        rgb.as_mut_slice()
+            .par_chunks_mut(width)
+            .zip(depth.as_mut_slice().par_chunks_mut(width))
+            .zip(instance.as_mut_slice().par_chunks_mut(width))
+            .enumerate()
+            .for_each(|(row, ((rgb_row, depth_row), instance_row))| {
+                let v = row as f64;
+                for u in 0..width {
+                    let i = row * width + u;
+                    let ray = Vector3::new(
+                        (u as f64 - camera.cx) / camera.fx,
+                        (v - camera.cy) / camera.fy,
+                        1.0,
                     );
-                }
-                let t = &triangles[winner as usize];
-                let layer = &self.layers[t.layer as usize];
-                let face = layer.faces[t.face as usize];
-                let [a, b, c] = face
-                    .map(|k| camera_from_world * layer.mesh.positions[k as usize].cast::<f64>());
-                let normal = (b - a).cross(&(c - a));
-                let denominator = normal.dot(&ray);
-                let depth = if denominator.abs() > 1e-12 {
-                    normal.dot(&a.coords) / denominator
-                } else {
-                    1.0 / f64::from(inv_depth[i])
-                };
-                let p = Point3::from(ray * depth);
-                // Barycentrics of p in the triangle (areas against the face normal).
-                let area2 = normal.norm_squared().max(1e-30);
-                let w_a = (b - p).cross(&(c - p)).dot(&normal) / area2;
-                let w_b = (c - p).cross(&(a - p)).dot(&normal) / area2;
-                let w_c = 1.0 - w_a - w_b;
-                let shading_normal = if layer.mesh.normals.is_empty() {
-                    normal.normalize()
-                } else {
-                    let n = face.map(|k| layer.mesh.normals[k as usize].cast::<f64>());
-                    camera_from_world.rotation * (n[0] * w_a + n[1] * w_b + n[2] * w_c).normalize()
-                };
-                let p_world = world_from_camera * p;
-                let albedo = match layer.material {
-                    Material::Terrain => world.terrain_albedo.sample(p_world.x, p_world.y),
-                    Material::Solid(base) => {
-                        rock_albedo(texture, base, p_world.x, p_world.y, p_world.z).map(f32::from)
+                    let winner = winners[i];
+                    if winner == u32::MAX {
+                        // Sky: brighter toward the horizon.
+                        let up = (world_from_camera.rotation * ray.normalize())
+                            .z
+                            .clamp(0.0, 1.0) as f32;
+                        rgb_row[u] = [(190.0 - 70.0 * up) as u8, (210.0 - 50.0 * up) as u8, 235];
+                        continue;
                     }
-                };
-                let lambert = shading_normal.dot(&sun).max(0.0) as f32;
-                let light = ambient + (1.0 - ambient) * lambert;
-                let rgb = albedo.map(|a| (a * light).round().clamp(0.0, 255.0) as u8);
-                (rgb, depth as f32, layer.instance_id)
-            })
-            .collect();
-        let (w, h) = (camera.width, camera.height);
-        let mut rgb = Vec::with_capacity(pixels.len());
-        let mut depth = Vec::with_capacity(pixels.len());
-        let mut instance = Vec::with_capacity(pixels.len());
-        for (c, d, id) in pixels {
-            rgb.push(c);
-            depth.push(d);
-            instance.push(id);
-        }
-        // Buffer lengths equal the camera's pixel count by construction.
+                    let t = &triangles[winner as usize];
+                    let layer = &self.layers[t.layer as usize];
+                    let [a, b, c] = &t.corners;
+                    let normal = &t.normal;
+                    let denominator = normal.dot(&ray);
+                    let z = if denominator.abs() > 1e-12 {
+                        normal.dot(&a.coords) / denominator
+                    } else {
+                        1.0 / f64::from(inv_depth[i])
+                    };
+                    let p = Point3::from(ray * z);
+                    let p_world = world_from_camera * p;
+                    let shading_normal: Vector3<f64> = if layer.mesh.normals.is_empty() {
+                        world_from_camera.rotation * normal.normalize()
+                    } else {
+                        // Barycentrics of p in the triangle (sub-areas against the face normal).
+                        let area2 = normal.norm_squared().max(1e-30);
+                        let w_a = (b - p).cross(&(c - p)).dot(normal) / area2;
+                        let w_b = (c - p).cross(&(a - p)).dot(normal) / area2;
+                        let face = layer.faces[t.face as usize];
+                        let n = face.map(|k| layer.mesh.normals[k as usize].cast::<f64>());
+                        n[0] * w_a + n[1] * w_b + n[2] * (1.0 - w_a - w_b)
+                    };
+                    let albedo = match layer.material {
+                        Material::Terrain => world.terrain_albedo.sample(p_world.x, p_world.y),
+                        Material::Solid(base) => {
+                            rock_albedo(texture, base, p_world.x, p_world.y, p_world.z)
+                                .map(f32::from)
+                        }
+                    };
+                    let lambert = (shading_normal.dot(&sun) / shading_normal.norm().max(1e-12))
+                        .max(0.0) as f32;
+                    let light = ambient + (1.0 - ambient) * lambert;
+                    rgb_row[u] = albedo.map(|a| (a * light + 0.5).clamp(0.0, 255.0) as u8);
+                    depth_row[u] = z as f32;
+                    instance_row[u] = layer.instance_id;
+                }
+            });
         RenderOutput {
-            rgb: RgbImage::from_vec(w, h, rgb).expect("w·h pixels"),
-            depth_m: DepthImage::from_vec(w, h, depth).expect("w·h pixels"),
-            instance: MaskImage::from_vec(w, h, instance).expect("w·h pixels"),
+            rgb,
+            depth_m: depth,
+            instance,
         }
     }
 }

@@ -1,6 +1,6 @@
 //! Triangle setup (culling, near-plane clipping, projection) and tile rasterization.
 
-use nalgebra::Point3;
+use nalgebra::{Point3, Vector3};
 use scarp_slam::PinholeCamera;
 
 /// Side of a square screen tile, pixels.
@@ -19,6 +19,10 @@ pub struct SetupTriangle {
     pub layer: u16,
     /// Index of the source face in the layer's reordered face list.
     pub face: u32,
+    /// The unclipped face's corners in camera coordinates, metres.
+    pub corners: [Point3<f64>; 3],
+    /// The face's unnormalised normal (b − a) × (c − a), camera frame.
+    pub normal: Vector3<f64>,
 }
 
 /// Sets up one camera-space triangle: culls back faces (faces wound clockwise seen from the
@@ -86,6 +90,8 @@ pub fn setup_triangle(
             bbox: [u0 as u32, v0 as u32, u1 as u32, v1 as u32],
             layer,
             face,
+            corners: *corners,
+            normal,
         });
     }
 }

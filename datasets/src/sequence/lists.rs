@@ -35,14 +35,14 @@ pub fn parse_image_list(text: &str, path: &Path) -> Result<Vec<(f64, String)>, D
             .ok_or_else(|| {
                 DatasetError::parse(path, number + 1, format!("`{t}` is not a timestamp"))
             })?;
-        if let Some((previous, _)) = entries.last() {
-            if t <= *previous {
-                return Err(DatasetError::parse(
-                    path,
-                    number + 1,
-                    format!("timestamp {t} is not after the previous one ({previous})"),
-                ));
-            }
+        if let Some((previous, _)) = entries.last()
+            && t <= *previous
+        {
+            return Err(DatasetError::parse(
+                path,
+                number + 1,
+                format!("timestamp {t} is not after the previous one ({previous})"),
+            ));
         }
         entries.push((t, file.to_string()));
     }

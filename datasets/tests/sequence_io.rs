@@ -1,0 +1,213 @@
+//! Sequence round trips and bad-input handling.
+
+use std::path::{Path, PathBuf};
+
+use scarp_datasets::paths;
+use scarp_datasets::sequence::{RenderSettings, Sequence, write_sequence};
+use scarp_datasets::world::World;
+use scarp_datasets::{estimator::EstimatorConfig, sensor::SensorConfig};
+use scarp_slam::PinholeCamera;
+
+struct TempDir(PathBuf);
+
+impl TempDir {
+    fn new(name: &str) -> Self {
+        let dir = std::env::temp_dir().join(format!("scarp-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        Self(dir)
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+fn small_world() -> World {
+    World::from_toml_str(
+        r#"
+        [terrain.procedural]
+        size_m = 30.0
+        resolution_m = 0.5
+        [[rocks]]
+        id = 4
+        role = "target"
+        position_m = [0.0, 0.0]
+        height_m = 1.2
+        shape = { boulder = { seed = 3, subdivisions = 4 } }
+        pedestal = { height_m = 0.8, top_radius_m = 0.3 }
+        contact_radius_m = 0.12
+        "#,
+        Path::new("small.toml"),
+        Path::new("."),
+    )
+    .unwrap()
+}
+
+fn settings(noise: bool) -> RenderSettings {
+    RenderSettings {
+        camera: PinholeCamera::from_hfov(160, 120, 80.0).unwrap(),
+        noise,
+        sensor: SensorConfig::default(),
+        estimator: EstimatorConfig::default(),
+        seed: 5,
+        depth_scale: 5000.0,
+    }
+}
+
+#[test]
+fn sequence_round_trip_is_exact() {
+    let dir = TempDir::new("roundtrip");
+    let world = small_world();
+    let poses = paths::default_orbit(&world, 6).unwrap();
+    let settings = settings(false);
+    let summary = write_sequence(&dir.0, &world, &poses, &settings, &|| {}).unwrap();
+    assert_eq!(summary.frames, 6);
+    let seq = Sequence::open(&dir.0).unwrap();
+    assert_eq!(seq.len(), 6);
+    assert_eq!(seq.camera, settings.camera);
+    assert!(seq.boxes.iter().any(|b| b.id == 4));
+    let renderer = scarp_datasets::render::Renderer::new(&world);
+    for (i, (entry, pose)) in seq.entries.iter().zip(&poses).enumerate() {
+        let truth = entry.world_from_camera_truth.unwrap();
+        assert!(
+            (truth.translation.vector - pose.world_from_camera.translation.vector).norm() <= 1e-9
+        );
+        assert!(truth.rotation.angle_to(&pose.world_from_camera.rotation) <= 1e-9);
+        assert_eq!(
+            entry.world_from_camera_estimate,
+            entry.world_from_camera_truth
+        );
+        let frame = seq.load_frame(i).unwrap();
+        let clean = renderer
+            .render(&settings.camera, &pose.world_from_camera)
+            .unwrap();
+        assert_eq!(frame.rgb, clean.rgb);
+        assert_eq!(frame.instance_mask.as_ref().unwrap(), &clean.instance);
+        for (&read, &rendered) in frame
+            .depth_m
+            .as_slice()
+            .iter()
+            .zip(clean.depth_m.as_slice())
+        {
+            if rendered > 0.0 && rendered < 13.0 {
+                assert!(
+                    (read - rendered).abs() <= 0.5 / 5000.0 + 1e-6,
+                    "{read} vs {rendered}"
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn noisy_sequences_are_deterministic() {
+    let (a, b) = (TempDir::new("det-a"), TempDir::new("det-b"));
+    let world = small_world();
+    let poses = paths::default_orbit(&world, 3).unwrap();
+    write_sequence(&a.0, &world, &poses, &settings(true), &|| {}).unwrap();
+    write_sequence(&b.0, &world, &poses, &settings(true), &|| {}).unwrap();
+    for file in [
+        "estimate.txt",
+        "boxes.txt",
+        "depth/0.050000.png",
+        "rgb/0.100000.png",
+    ] {
+        assert_eq!(
+            std::fs::read(a.0.join(file)).unwrap(),
+            std::fs::read(b.0.join(file)).unwrap(),
+            "{file}"
+        );
+    }
+    let seq = Sequence::open(&a.0).unwrap();
+    let estimate = seq.entries[0].world_from_camera_estimate.unwrap();
+    let truth = seq.entries[0].world_from_camera_truth.unwrap();
+    assert!((estimate.translation.vector - truth.translation.vector).norm() > 1e-3);
+}
+
+fn expect_error(
+    result: Result<impl std::fmt::Debug, scarp_datasets::DatasetError>,
+    needles: &[&str],
+) {
+    let message = result.expect_err("expected an error").to_string();
+    for needle in needles {
+        assert!(
+            message.contains(needle),
+            "`{message}` should mention `{needle}`"
+        );
+    }
+}
+
+#[test]
+fn bad_input_gives_errors_that_name_the_culprit() {
+    let dir = TempDir::new("bad");
+    let world = small_world();
+    let poses = paths::default_orbit(&world, 2).unwrap();
+    write_sequence(&dir.0, &world, &poses, &settings(false), &|| {}).unwrap();
+
+    // A missing file.
+    expect_error(
+        Sequence::open(&dir.0.join("nowhere")),
+        &["nowhere", "camera.toml"],
+    );
+    // A corrupt PNG.
+    let seq = Sequence::open(&dir.0).unwrap();
+    std::fs::write(&seq.entries[1].rgb_path, b"\x89PNG\r\n\x1a\nnot really").unwrap();
+    expect_error(seq.load_frame(1), &["0.050000.png"]);
+    // A depth PNG of the wrong kind (8-bit colour).
+    std::fs::copy(&seq.entries[0].rgb_path, &seq.entries[0].depth_path).unwrap();
+    expect_error(seq.load_frame(0), &["depth", "16-bit"]);
+    // Timestamps out of order.
+    std::fs::write(
+        dir.0.join("depth.txt"),
+        "0.05 depth/0.050000.png\n0.0 depth/0.000000.png\n",
+    )
+    .unwrap();
+    expect_error(Sequence::open(&dir.0), &["depth.txt:2", "not after"]);
+    std::fs::write(
+        dir.0.join("groundtruth.txt"),
+        "0 0 0 0 0 0 0 1\n0 1 0 0 0 0 0 1\n",
+    )
+    .unwrap();
+    std::fs::write(dir.0.join("depth.txt"), "0.0 depth/0.000000.png\n").unwrap();
+    expect_error(Sequence::open(&dir.0), &["groundtruth.txt:2"]);
+    // An unknown key in camera.toml and in a world file.
+    std::fs::write(dir.0.join("camera.toml"), "fx = 1.0\nfy = 1.0\ncx = 0.0\ncy = 0.0\nwidth = 2\nheight = 2\ndepth_scale = 5000.0\nfocal = 3\n").unwrap();
+    expect_error(Sequence::open(&dir.0), &["camera.toml", "focal"]);
+    expect_error(
+        World::from_toml_str(
+            "[terrain.procedural]\nsize_m = 10.0\nroughnes_m = 1.0\n",
+            Path::new("w.toml"),
+            Path::new("."),
+        ),
+        &["w.toml", "roughnes_m", "line 3"],
+    );
+    // A truncated PLY rock mesh.
+    let full = scarp_datasets::world::DOUBLE_ROCK_PLY;
+    std::fs::write(dir.0.join("rock.ply"), &full[..full.len() / 2]).unwrap();
+    let world_text = "[terrain.procedural]\nsize_m = 10.0\n[[rocks]]\nid = 1\nrole = \"target\"\nposition_m = [0.0, 0.0]\nheight_m = 1.0\nshape = { mesh = \"rock.ply\" }\n";
+    expect_error(
+        World::from_toml_str(world_text, Path::new("w.toml"), &dir.0),
+        &["rock.ply"],
+    );
+    // A missing rock mesh, and a missing world file.
+    std::fs::remove_file(dir.0.join("rock.ply")).unwrap();
+    expect_error(
+        World::from_toml_str(world_text, Path::new("w.toml"), &dir.0),
+        &["rock.ply"],
+    );
+    expect_error(World::load(&dir.0.join("absent.toml")), &["absent.toml"]);
+    // A rock outside the terrain names its key.
+    expect_error(
+        World::from_toml_str(
+            &world_text
+                .replace("[0.0, 0.0]", "[90.0, 0.0]")
+                .replace("rock.ply", "builtin:double_rock"),
+            Path::new("w.toml"),
+            &dir.0,
+        ),
+        &["rocks[0].position_m"],
+    );
+}

@@ -1,0 +1,651 @@
+//! Clearance of paths and trajectories from the terrain and the rocks.
+//!
+//! The terrain becomes a parry3d [`HeightField`] and mesh obstacles parry3d [`TriMesh`]es; this
+//! module is the only place that touches parry (f32, glam). Query points are moved into each
+//! shape's local frame in f64 first, so the f32 conversion loses nothing at ENU coordinates of
+//! a few kilometres.
+//!
+//! Clearance is the Euclidean distance from the vehicle's position to the nearest surface,
+//! negative when the position is under the terrain or inside an obstacle.
+
+use nalgebra::Point3;
+use parry3d::math::Vector as PVec;
+use parry3d::query::PointQuery;
+use parry3d::shape::{HeightField, TriMesh, TriMeshFlags};
+use parry3d::utils::Array2;
+use serde::{Deserialize, Serialize};
+
+use crate::error::{PlanError, check_point, check_positive};
+use crate::geometry::{Path, Waypoint};
+use crate::minsnap::{MinSnapConfig, StartState, Trajectory, plan_min_snap};
+use crate::terrain::{Heightfield, Obstacle};
+
+/// Tunables of the clearance checks and repairs.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct ClearanceConfig {
+    /// Minimum distance from terrain and obstacles (m). Default 1.5 (issue 8).
+    pub min_clearance_m: f64,
+    /// Spacing of the samples along straight path segments (m). Default 0.25.
+    pub path_sample_spacing_m: f64,
+    /// Period of the samples along trajectories (s). Default 0.05 (≤ 5 cm at 1 m/s).
+    pub trajectory_sample_period_s: f64,
+    /// Step of each raise (or slide) when repairing (m). Default 0.5.
+    pub repair_step_m: f64,
+    /// Largest total raise of a ring or path when repairing (m). Default 10.
+    pub max_raise_m: f64,
+    /// Largest number of waypoints inserted to pull a trajectory back to its (clear) path.
+    /// Default 16.
+    pub max_inserted_waypoints: usize,
+}
+
+impl Default for ClearanceConfig {
+    fn default() -> Self {
+        Self {
+            min_clearance_m: 1.5,
+            path_sample_spacing_m: 0.25,
+            trajectory_sample_period_s: 0.05,
+            repair_step_m: 0.5,
+            max_raise_m: 10.0,
+            max_inserted_waypoints: 16,
+        }
+    }
+}
+
+impl ClearanceConfig {
+    /// Checks that every value is finite and positive (the clearance may be 0).
+    pub fn validate(&self) -> Result<(), PlanError> {
+        crate::error::check_range("clearance.min_clearance_m", self.min_clearance_m, 0.0, 1e4)?;
+        check_positive(
+            "clearance.path_sample_spacing_m",
+            self.path_sample_spacing_m,
+        )?;
+        check_positive(
+            "clearance.trajectory_sample_period_s",
+            self.trajectory_sample_period_s,
+        )?;
+        check_positive("clearance.repair_step_m", self.repair_step_m)?;
+        crate::error::check_range("clearance.max_raise_m", self.max_raise_m, 0.0, 1e4)?;
+        Ok(())
+    }
+}
+
+/// What a clearance sample measured against.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum ClearanceSource {
+    /// The terrain heightfield.
+    Terrain,
+    /// The obstacle with this index (in the order given to [`Environment::new`]).
+    Obstacle(usize),
+}
+
+impl std::fmt::Display for ClearanceSource {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            ClearanceSource::Terrain => write!(f, "terrain"),
+            ClearanceSource::Obstacle(i) => write!(f, "obstacle {i}"),
+        }
+    }
+}
+
+/// Clearance at one point.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ClearanceSample {
+    /// Signed distance to the nearest surface (m); negative inside.
+    pub clearance_m: f64,
+    /// What that surface belongs to.
+    pub source: ClearanceSource,
+}
+
+/// Summary of a check over many points.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ClearanceReport {
+    /// The required minimum (m).
+    pub required_m: f64,
+    /// Smallest clearance found; `None` if the environment is empty.
+    pub min_clearance_m: Option<f64>,
+    /// Where the smallest clearance was found (world ENU, m).
+    pub worst_position_m: Option<Point3<f64>>,
+    /// What was closest there.
+    pub worst_source: Option<ClearanceSource>,
+    /// Where along the input the worst point lies: time (s) for trajectories, arc length (m)
+    /// for paths.
+    pub worst_at: f64,
+    /// Index of the segment holding the worst point.
+    pub worst_segment: usize,
+    /// Number of points checked.
+    pub samples: usize,
+    /// Number of points closer than `required_m`.
+    pub violations: usize,
+}
+
+impl ClearanceReport {
+    fn new(required_m: f64) -> Self {
+        Self {
+            required_m,
+            min_clearance_m: None,
+            worst_position_m: None,
+            worst_source: None,
+            worst_at: 0.0,
+            worst_segment: 0,
+            samples: 0,
+            violations: 0,
+        }
+    }
+
+    fn add(&mut self, p: &Point3<f64>, sample: Option<ClearanceSample>, at: f64, segment: usize) {
+        self.samples += 1;
+        let Some(s) = sample else { return };
+        if s.clearance_m < self.required_m {
+            self.violations += 1;
+        }
+        if self.min_clearance_m.is_none_or(|m| s.clearance_m < m) {
+            self.min_clearance_m = Some(s.clearance_m);
+            self.worst_position_m = Some(*p);
+            self.worst_source = Some(s.source);
+            self.worst_at = at;
+            self.worst_segment = segment;
+        }
+    }
+
+    /// True if no point is closer than the requirement.
+    pub fn is_clear(&self) -> bool {
+        self.violations == 0
+    }
+
+    /// The error describing this report's worst point, with `reason`.
+    pub fn to_error(&self, reason: impl Into<String>) -> PlanError {
+        let p = self.worst_position_m.unwrap_or_else(Point3::origin);
+        PlanError::Clearance {
+            clearance_m: self.min_clearance_m.unwrap_or(f64::INFINITY),
+            required_m: self.required_m,
+            x_m: p.x,
+            y_m: p.y,
+            z_m: p.z,
+            source_name: self
+                .worst_source
+                .map_or_else(|| "none".to_string(), |s| s.to_string()),
+            reason: reason.into(),
+        }
+    }
+
+    /// `Ok` if clear, else the error with `reason`.
+    pub fn ensure_clear(&self, reason: impl Into<String>) -> Result<(), PlanError> {
+        if self.is_clear() {
+            Ok(())
+        } else {
+            Err(self.to_error(reason))
+        }
+    }
+}
+
+#[derive(Debug, Clone)]
+struct TerrainShape {
+    grid: Heightfield,
+    shape: HeightField,
+    center_x_m: f64,
+    center_y_m: f64,
+    /// Height subtracted before the f32 conversion, so that f32 keeps millimetres.
+    z_ref_m: f64,
+}
+
+impl TerrainShape {
+    fn new(grid: Heightfield) -> Result<Self, PlanError> {
+        grid.validate()?;
+        let (nx, ny) = (grid.nx, grid.ny);
+        let (lo, hi) = grid.height_range_m();
+        let z_ref_m = 0.5 * (lo + hi);
+        // parry: rows advance along local z, columns along local x, column-major storage.
+        // Local (x, y, z) = (world x − cx, world z − z_ref, world y − cy): an isometry of R³
+        // (a reflection), which preserves distances, all this module asks of it.
+        let mut data = vec![0.0f32; nx * ny];
+        for j in 0..ny {
+            for i in 0..nx {
+                data[j + i * ny] = (grid.node(i, j) - z_ref_m) as f32;
+            }
+        }
+        let sx = (nx - 1) as f64 * grid.spacing_m;
+        let sy = (ny - 1) as f64 * grid.spacing_m;
+        let shape = HeightField::new(
+            Array2::new(ny, nx, data),
+            PVec::new(sx as f32, 1.0, sy as f32),
+        );
+        Ok(Self {
+            center_x_m: grid.origin_x_m + 0.5 * sx,
+            center_y_m: grid.origin_y_m + 0.5 * sy,
+            shape,
+            grid,
+            z_ref_m,
+        })
+    }
+
+    fn clearance(&self, p: &Point3<f64>) -> f64 {
+        let local = PVec::new(
+            (p.x - self.center_x_m) as f32,
+            (p.z - self.z_ref_m) as f32,
+            (p.y - self.center_y_m) as f32,
+        );
+        let proj = self.shape.project_local_point(local, false);
+        let d = f64::from((proj.point - local).length());
+        match self.grid.height_at(p.x, p.y) {
+            Some(h) if p.z < h => -d,
+            _ => d,
+        }
+    }
+}
+
+#[derive(Debug, Clone)]
+enum ObstacleShape {
+    Mesh {
+        mesh: Box<TriMesh>,
+        origin_m: Point3<f64>,
+        oriented: bool,
+    },
+    Cylinder {
+        cx: f64,
+        cy: f64,
+        r: f64,
+        z0: f64,
+        z1: f64,
+    },
+}
+
+impl ObstacleShape {
+    fn new(index: usize, o: &Obstacle) -> Result<Self, PlanError> {
+        o.validate(index)?;
+        match o {
+            Obstacle::Mesh { positions_m, faces } => {
+                let origin = o.center_m();
+                let verts: Vec<PVec> = positions_m
+                    .iter()
+                    .map(|p| {
+                        PVec::new(
+                            (p[0] - origin.x) as f32,
+                            (p[1] - origin.y) as f32,
+                            (p[2] - origin.z) as f32,
+                        )
+                    })
+                    .collect();
+                let (mesh, oriented) =
+                    match TriMesh::with_flags(verts.clone(), faces.clone(), TriMeshFlags::ORIENTED)
+                    {
+                        Ok(m) => (m, true),
+                        Err(_) => (
+                            TriMesh::new(verts, faces.clone()).map_err(|e| {
+                                PlanError::InvalidObstacle {
+                                    index,
+                                    reason: format!("parry3d rejected the mesh: {e:?}"),
+                                }
+                            })?,
+                            false,
+                        ),
+                    };
+                Ok(Self::Mesh {
+                    mesh: Box::new(mesh),
+                    origin_m: origin,
+                    oriented,
+                })
+            }
+            Obstacle::Cylinder {
+                center_x_m,
+                center_y_m,
+                radius_m,
+                z_bottom_m,
+                z_top_m,
+            } => Ok(Self::Cylinder {
+                cx: *center_x_m,
+                cy: *center_y_m,
+                r: *radius_m,
+                z0: *z_bottom_m,
+                z1: *z_top_m,
+            }),
+        }
+    }
+
+    fn clearance(&self, p: &Point3<f64>) -> f64 {
+        match self {
+            ObstacleShape::Mesh {
+                mesh,
+                origin_m,
+                oriented,
+            } => {
+                let d = p - origin_m;
+                let local = PVec::new(d.x as f32, d.y as f32, d.z as f32);
+                let proj = mesh.project_local_point(local, false);
+                let dist = f64::from((proj.point - local).length());
+                if *oriented && mesh.contains_local_point(local) {
+                    -dist
+                } else {
+                    dist
+                }
+            }
+            ObstacleShape::Cylinder { cx, cy, r, z0, z1 } => {
+                let dr = ((p.x - cx).powi(2) + (p.y - cy).powi(2)).sqrt() - r;
+                let dz = (z0 - p.z).max(p.z - z1);
+                if dr > 0.0 && dz > 0.0 {
+                    (dr * dr + dz * dz).sqrt()
+                } else {
+                    dr.max(dz)
+                }
+            }
+        }
+    }
+}
+
+/// The world the vehicle must keep clear of: an optional terrain and a list of obstacles.
+#[derive(Debug, Clone)]
+pub struct Environment {
+    terrain: Option<TerrainShape>,
+    obstacles: Vec<ObstacleShape>,
+}
+
+impl Environment {
+    /// Builds the environment. Fails if the terrain grid or an obstacle is malformed.
+    pub fn new(terrain: Option<Heightfield>, obstacles: &[Obstacle]) -> Result<Self, PlanError> {
+        let terrain = terrain.map(TerrainShape::new).transpose()?;
+        let obstacles = obstacles
+            .iter()
+            .enumerate()
+            .map(|(i, o)| ObstacleShape::new(i, o))
+            .collect::<Result<Vec<_>, _>>()?;
+        Ok(Self { terrain, obstacles })
+    }
+
+    /// An environment with nothing in it.
+    pub fn empty() -> Self {
+        Self {
+            terrain: None,
+            obstacles: Vec::new(),
+        }
+    }
+
+    /// The terrain grid, if any.
+    pub fn terrain(&self) -> Option<&Heightfield> {
+        self.terrain.as_ref().map(|t| &t.grid)
+    }
+
+    /// Terrain height under (x, y) (m), if the terrain covers that point.
+    pub fn terrain_height_at(&self, x_m: f64, y_m: f64) -> Option<f64> {
+        self.terrain
+            .as_ref()
+            .and_then(|t| t.grid.height_at(x_m, y_m))
+    }
+
+    /// Fails with [`PlanError::TargetBelowTerrain`] if `p` lies more than `tolerance_m` below
+    /// the terrain surface, and with [`PlanError::NonFinite`] for NaN input.
+    pub fn ensure_above_terrain(&self, p: &Point3<f64>, tolerance_m: f64) -> Result<(), PlanError> {
+        check_point("target", p)?;
+        if let Some(h) = self.terrain_height_at(p.x, p.y)
+            && p.z < h - tolerance_m
+        {
+            return Err(PlanError::TargetBelowTerrain {
+                target_z_m: p.z,
+                terrain_z_m: h,
+                x_m: p.x,
+                y_m: p.y,
+            });
+        }
+        Ok(())
+    }
+
+    /// Signed clearance at `p` and what it is measured to, or `None` if the environment is
+    /// empty or `p` is not finite.
+    pub fn clearance_at(&self, p: &Point3<f64>) -> Option<ClearanceSample> {
+        if !p.iter().all(|v| v.is_finite()) {
+            return None;
+        }
+        let mut best: Option<ClearanceSample> = None;
+        let mut consider = |c: f64, source: ClearanceSource| {
+            if best.is_none_or(|b| c < b.clearance_m) {
+                best = Some(ClearanceSample {
+                    clearance_m: c,
+                    source,
+                });
+            }
+        };
+        if let Some(t) = &self.terrain {
+            consider(t.clearance(p), ClearanceSource::Terrain);
+        }
+        for (i, o) in self.obstacles.iter().enumerate() {
+            consider(o.clearance(p), ClearanceSource::Obstacle(i));
+        }
+        best
+    }
+
+    /// Checks the straight segments between the waypoints of `path`, sampled every
+    /// `cfg.path_sample_spacing_m`.
+    pub fn check_path(&self, path: &Path, cfg: &ClearanceConfig) -> ClearanceReport {
+        let mut report = ClearanceReport::new(cfg.min_clearance_m);
+        let mut arc = 0.0;
+        if let Some(first) = path.waypoints.first() {
+            report.add(
+                &first.position_m,
+                self.clearance_at(&first.position_m),
+                0.0,
+                0,
+            );
+        }
+        for (seg, w) in path.waypoints.windows(2).enumerate() {
+            let d = w[1].position_m - w[0].position_m;
+            let len = d.norm();
+            let n = (len / cfg.path_sample_spacing_m).ceil().max(1.0) as usize;
+            for k in 1..=n {
+                let f = k as f64 / n as f64;
+                let p = w[0].position_m + d * f;
+                report.add(&p, self.clearance_at(&p), arc + f * len, seg);
+            }
+            arc += len;
+        }
+        report
+    }
+
+    /// Checks `trajectory` sampled every `cfg.trajectory_sample_period_s` (and at its end).
+    pub fn check_trajectory(
+        &self,
+        trajectory: &Trajectory,
+        cfg: &ClearanceConfig,
+    ) -> ClearanceReport {
+        let mut report = ClearanceReport::new(cfg.min_clearance_m);
+        let knots = trajectory.knot_times_s();
+        let n = (trajectory.duration_s() / cfg.trajectory_sample_period_s).ceil() as usize;
+        for k in 0..=n {
+            let t = (k as f64 * cfg.trajectory_sample_period_s).min(trajectory.duration_s());
+            let p = trajectory.sample(t).position_m;
+            let seg = knots
+                .partition_point(|&x| x <= t)
+                .saturating_sub(1)
+                .min(knots.len().saturating_sub(2));
+            report.add(&p, self.clearance_at(&p), t, seg);
+        }
+        report
+    }
+
+    /// Checks a list of positions (e.g. a flown track); `at` of the report is the index.
+    pub fn check_points<'a>(
+        &self,
+        points: impl IntoIterator<Item = &'a Point3<f64>>,
+        cfg: &ClearanceConfig,
+    ) -> ClearanceReport {
+        let mut report = ClearanceReport::new(cfg.min_clearance_m);
+        for (i, p) in points.into_iter().enumerate() {
+            report.add(p, self.clearance_at(p), i as f64, i);
+        }
+        report
+    }
+}
+
+/// A repair applied to make a plan clear.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub enum Repair {
+    /// A whole path was raised by this much (m).
+    RaisedPath {
+        /// Raise (m).
+        raise_m: f64,
+    },
+    /// A mapping ring was moved up and out along its lower camera ray, which keeps the bottom
+    /// of its coverage band where it was.
+    SlidRing {
+        /// Ring index.
+        ring: usize,
+        /// Raise (m).
+        raise_m: f64,
+        /// Radius increase (m).
+        widen_m: f64,
+    },
+    /// A mapping ring was raised without widening; its band's bottom rose by `raise_m`.
+    RaisedRing {
+        /// Ring index.
+        ring: usize,
+        /// Raise (m).
+        raise_m: f64,
+    },
+    /// A waypoint was inserted on the straight path to keep the trajectory near it.
+    InsertedWaypoint {
+        /// Index of the segment that was split.
+        segment: usize,
+    },
+}
+
+/// Plans a min-snap trajectory along `path` and makes sure it keeps `cfg.min_clearance_m`.
+///
+/// The straight path must be clear (else the error says so: repair the path first). When the
+/// smooth trajectory cuts a corner too close, the violating segment is split at its midpoint
+/// (pulling the trajectory toward the clear straight line) and the trajectory re-planned, up to
+/// `cfg.max_inserted_waypoints` times; then it is rejected with the worst point.
+pub fn plan_clear_trajectory(
+    path: &Path,
+    start: &StartState,
+    min_snap: &MinSnapConfig,
+    env: &Environment,
+    cfg: &ClearanceConfig,
+) -> Result<(Trajectory, ClearanceReport, Vec<Repair>), PlanError> {
+    cfg.validate()?;
+    path.validate()?;
+    env.check_path(path, cfg)
+        .ensure_clear("the straight path itself is too close; repair the path (raise it) first")?;
+    let mut path = path.clone();
+    let mut repairs = Vec::new();
+    loop {
+        let traj = plan_min_snap(&path, start, min_snap)?;
+        let report = env.check_trajectory(&traj, cfg);
+        if report.is_clear() {
+            return Ok((traj, report, repairs));
+        }
+        if repairs.len() >= cfg.max_inserted_waypoints {
+            return Err(report.to_error(format!(
+                "still too close after inserting {} waypoints",
+                repairs.len()
+            )));
+        }
+        // The leg of the input path that holds the worst time (long legs may have been split
+        // into several trajectory segments).
+        let times = traj.waypoint_times_s();
+        let seg = times
+            .partition_point(|&t| t <= report.worst_at)
+            .saturating_sub(1)
+            .min(path.waypoints.len() - 2);
+        let (a, b) = (path.waypoints[seg], path.waypoints[seg + 1]);
+        let mid = Waypoint::new(
+            Point3::from((a.position_m.coords + b.position_m.coords) * 0.5),
+            0.5 * (a.yaw_rad + b.yaw_rad),
+        );
+        if (b.position_m - a.position_m).norm() < 2.0 * cfg.path_sample_spacing_m {
+            return Err(report.to_error("segment too short to split further"));
+        }
+        path.waypoints.insert(seg + 1, mid);
+        repairs.push(Repair::InsertedWaypoint { segment: seg });
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn flat_terrain_clearance_is_height() {
+        let hf = Heightfield::flat(-50.0, -50.0, 1.0, 101, 101, 12.0).unwrap();
+        let env = Environment::new(Some(hf), &[]).unwrap();
+        let c = env.clearance_at(&Point3::new(3.3, -7.1, 14.5)).unwrap();
+        assert!((c.clearance_m - 2.5).abs() < 1e-4, "{c:?}");
+        let c = env.clearance_at(&Point3::new(3.3, -7.1, 11.0)).unwrap();
+        assert!((c.clearance_m + 1.0).abs() < 1e-4, "{c:?}");
+    }
+
+    #[test]
+    fn sloped_terrain_distance_is_perpendicular() {
+        // z = x: distance from (0, 0, h) to the plane is h / √2.
+        let hf = Heightfield::from_fn(-20.0, -20.0, 0.5, 81, 81, |x, _| x).unwrap();
+        let env = Environment::new(Some(hf), &[]).unwrap();
+        let c = env.clearance_at(&Point3::new(0.0, 3.0, 2.0)).unwrap();
+        assert!((c.clearance_m - 2.0 / 2f64.sqrt()).abs() < 1e-3, "{c:?}");
+    }
+
+    #[test]
+    fn cylinder_and_mesh_obstacles() {
+        // A unit cube mesh centred at (10, 0, 1), outward faces.
+        let v = [
+            [9.5, -0.5, 0.5],
+            [10.5, -0.5, 0.5],
+            [10.5, 0.5, 0.5],
+            [9.5, 0.5, 0.5],
+            [9.5, -0.5, 1.5],
+            [10.5, -0.5, 1.5],
+            [10.5, 0.5, 1.5],
+            [9.5, 0.5, 1.5],
+        ];
+        let f = vec![
+            [0, 2, 1],
+            [0, 3, 2],
+            [4, 5, 6],
+            [4, 6, 7],
+            [0, 1, 5],
+            [0, 5, 4],
+            [1, 2, 6],
+            [1, 6, 5],
+            [2, 3, 7],
+            [2, 7, 6],
+            [3, 0, 4],
+            [3, 4, 7],
+        ];
+        let obstacles = vec![
+            Obstacle::Mesh {
+                positions_m: v.to_vec(),
+                faces: f,
+            },
+            Obstacle::Cylinder {
+                center_x_m: 0.0,
+                center_y_m: 0.0,
+                radius_m: 1.0,
+                z_bottom_m: 0.0,
+                z_top_m: 2.0,
+            },
+        ];
+        let env = Environment::new(None, &obstacles).unwrap();
+        let c = env.clearance_at(&Point3::new(12.5, 0.0, 1.0)).unwrap();
+        assert_eq!(c.source, ClearanceSource::Obstacle(0));
+        assert!((c.clearance_m - 2.0).abs() < 1e-5);
+        let inside = env.clearance_at(&Point3::new(10.0, 0.1, 1.0)).unwrap();
+        assert!(inside.clearance_m < 0.0, "{inside:?}");
+        let c = env.clearance_at(&Point3::new(0.0, 3.0, 1.0)).unwrap();
+        assert_eq!(c.source, ClearanceSource::Obstacle(1));
+        assert!((c.clearance_m - 2.0).abs() < 1e-12);
+        let c = env.clearance_at(&Point3::new(0.0, 4.0, 6.0)).unwrap();
+        assert!((c.clearance_m - 5.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn below_terrain_target_is_rejected() {
+        let hf = Heightfield::flat(-10.0, -10.0, 1.0, 21, 21, 5.0).unwrap();
+        let env = Environment::new(Some(hf), &[]).unwrap();
+        let err = env
+            .ensure_above_terrain(&Point3::new(0.0, 0.0, 3.0), 0.5)
+            .unwrap_err();
+        assert!(matches!(err, PlanError::TargetBelowTerrain { .. }), "{err}");
+        env.ensure_above_terrain(&Point3::new(0.0, 0.0, 4.8), 0.5)
+            .unwrap();
+        assert!(
+            env.ensure_above_terrain(&Point3::new(f64::NAN, 0.0, 4.8), 0.5)
+                .is_err()
+        );
+    }
+}

@@ -1,0 +1,424 @@
+//! Paths: the rings' camera coverage spans the cylinder (geometric test), the next-best view
+//! matches the analytic optimum, clearance repairs work or reject with a reason, and bad input
+//! gives clear errors.
+
+mod common;
+
+use nalgebra::{Point3, Vector3};
+use proptest::prelude::*;
+use scarp_planning::finelocalize::{NbvRule, view_direction};
+use scarp_planning::geometry::wrap_angle;
+use scarp_planning::mapping_rings::scan_depressions_rad;
+use scarp_planning::prelude::*;
+
+/// Independent of the planner's band formula: a height z on the cylinder surface facing a ring
+/// waypoint is seen if the ray from the camera to it is inside the scan angle β around the
+/// optical axis (depression γ), and inside the camera's actual vertical field of view.
+fn seen_by_some_ring(
+    plan: &RingPlan,
+    camera: &CameraConfig,
+    cfg: &MappingRingConfig,
+    z: f64,
+) -> bool {
+    let g = camera.pitch_down_rad();
+    let half_beta = 0.5 * cfg.vertical_scan_deg.to_radians();
+    let half_vfov = 0.5 * camera.vfov_rad();
+    let cyl = &plan.cylinder;
+    plan.ring_waypoints.iter().any(|range| {
+        plan.path.waypoints[range.clone()].iter().any(|w| {
+            let cam = w.position_m;
+            let horiz = ((cam.x - cyl.center_x_m).powi(2) + (cam.y - cyl.center_y_m).powi(2))
+                .sqrt()
+                - cyl.radius_m;
+            let depression = (cam.z - z).atan2(horiz);
+            // The optical axis points at the cylinder axis (yaw toward the axis).
+            let toward = (cyl.center_y_m - cam.y).atan2(cyl.center_x_m - cam.x);
+            let yaw_ok = wrap_angle(toward - w.yaw_rad).abs() < 1e-6;
+            yaw_ok
+                && (depression - g).abs() <= half_beta + 1e-9
+                && (depression - g).abs() <= half_vfov
+        })
+    })
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 48, ..ProptestConfig::default() })]
+
+    #[test]
+    fn rings_cover_the_cylinder_bottom_to_top(
+        radius in 0.2..4.0f64,
+        height in 0.3..30.0f64,
+        bottom in -5.0..50.0f64,
+        standoff in 0.8..4.0f64,
+        az in -3.1..3.1f64,
+    ) {
+        let camera = CameraConfig::default();
+        let cfg = MappingRingConfig { standoff_m: standoff, ..Default::default() };
+        let cyl = VerticalCylinder::new(1.0, -2.0, radius, bottom, bottom + height).unwrap();
+        let start = Waypoint::new(Point3::new(1.0 + 20.0 * az.cos(), -2.0 + 20.0 * az.sin(), bottom + 30.0), 0.0);
+        let plan = plan_mapping_rings(&cyl, &start, &camera, &cfg).unwrap();
+        prop_assert!(plan.coverage_gaps().is_empty(), "gaps {:?}", plan.coverage_gaps());
+        let n = 200;
+        for k in 0..=n {
+            let z = bottom + height * k as f64 / n as f64;
+            prop_assert!(seen_by_some_ring(&plan, &camera, &cfg, z), "z = {z} unseen; rings {:?}", plan.rings);
+        }
+        // The first ring's lower ray just reaches the bottom (paper §IV).
+        let (lower, _) = scan_depressions_rad(&camera, &cfg);
+        prop_assert!((plan.rings[0].z_m - (bottom + standoff * lower.tan())).abs() < 1e-9);
+        // Rings alternate direction and sit at r_e + r_m.
+        for (k, r) in plan.rings.iter().enumerate() {
+            prop_assert_eq!(r.counter_clockwise, k % 2 == 0);
+            prop_assert!((r.radius_m - (radius + standoff)).abs() < 1e-12);
+        }
+    }
+}
+
+/// Deterministic Gaussian samples (SplitMix64 + Box–Muller).
+fn gaussian_cloud(
+    center: Point3<f64>,
+    axes: [Vector3<f64>; 3],
+    sigmas: [f64; 3],
+    n: usize,
+) -> Vec<Point3<f64>> {
+    let mut state = 0x1234_5678_u64;
+    let mut next = || {
+        state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = state;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64 + 1e-12
+    };
+    (0..n)
+        .map(|_| {
+            let mut p = center.coords;
+            for (a, s) in axes.iter().zip(sigmas) {
+                let g = (-2.0 * next().ln()).sqrt() * (std::f64::consts::TAU * next()).cos();
+                p += a * (s * g);
+            }
+            Point3::from(p)
+        })
+        .collect()
+}
+
+#[test]
+fn next_best_view_matches_the_analytic_optimum() {
+    let camera = CameraConfig::default();
+    let g = camera.pitch_down_rad();
+    for (tilt_deg, az_deg) in [(40.0, 30.0), (25.0, -120.0), (70.0, 160.0), (10.0, 75.0)] {
+        let (t, a) = (f64::to_radians(tilt_deg), f64::to_radians(az_deg));
+        // Smallest axis υ (true), and two large ones ⟂ to it.
+        let u = Vector3::new(t.sin() * a.cos(), t.sin() * a.sin(), t.cos());
+        let v = u.cross(&Vector3::z()).normalize();
+        let w = u.cross(&v);
+        let ce = Point3::new(10.0, -5.0, 3.0);
+        let pts = gaussian_cloud(ce, [u, v, w], [0.3, 3.0, 1.5], 2000);
+        let current = Waypoint::new(Point3::new(40.0, 0.0, 25.0), 0.0);
+        let plan = plan_fine_localization(
+            &pts,
+            &current,
+            25.0,
+            &camera,
+            &FineLocalizeConfig::default(),
+        )
+        .unwrap();
+        assert_eq!(plan.nbv_rule, NbvRule::Eigenvector);
+        // The camera's optical axis at the next-best-view pose (yaw toward C_e, pitch γ).
+        let nbv = plan.next_best_view;
+        let world_from_body = nalgebra::Isometry3::from_parts(
+            nbv.position_m.coords.into(),
+            nalgebra::UnitQuaternion::from_euler_angles(0.0, 0.0, nbv.yaw_rad),
+        );
+        let axis = (world_from_body * camera.body_from_camera()) * Vector3::z();
+        // Analytic optimum under fixed γ: the view direction at azimuth atan2(υ_y, υ_x).
+        let best = view_direction(u.y.atan2(u.x), g);
+        let err = axis.angle(&best).to_degrees();
+        // Brute force: the azimuth minimising the angle between the optical axis and ±υ.
+        let line_angle = |d: &Vector3<f64>| d.angle(&u).min(d.angle(&-u));
+        let brute = (0..3600)
+            .map(|k| view_direction(k as f64 * std::f64::consts::TAU / 3600.0, g))
+            .min_by(|x, y| line_angle(x).total_cmp(&line_angle(y)))
+            .unwrap();
+        println!(
+            "υ tilt {tilt_deg}°, az {az_deg}°: NBV axis {:.2}° from the analytic optimum, {:.2}° from brute force",
+            err,
+            axis.angle(&brute).to_degrees()
+        );
+        assert!(err < 5.0, "{err}°");
+        assert!(axis.angle(&brute).to_degrees() < 5.0);
+        // The optical axis passes through C_e.
+        let to_ce = (plan.pca.centroid_m - nbv.position_m).normalize();
+        assert!(axis.angle(&to_ce).to_degrees() < 1e-6);
+    }
+}
+
+#[test]
+fn ring_on_a_slope_is_slid_out_and_keeps_coverage() {
+    // A 56° slope rising toward +x; a 2 m rock at the origin.
+    let terrain = Heightfield::from_fn(-40.0, -40.0, 0.5, 161, 161, |x, _| 1.5 * x).unwrap();
+    let env = Environment::new(Some(terrain), &[]).unwrap();
+    let cfg = PlanningConfig::default();
+    let cyl = VerticalCylinder::new(0.0, 0.0, 1.0, 0.0, 2.0).unwrap();
+    let start = Waypoint::new(Point3::new(-6.0, 0.0, 8.0), 0.0);
+    let unrepaired = plan_mapping_rings(&cyl, &start, &cfg.camera, &cfg.mapping).unwrap();
+    assert!(
+        !env.check_path(&unrepaired.path, &cfg.clearance).is_clear(),
+        "fixture must violate"
+    );
+    let plan = plan_mapping_rings_clear(
+        &cyl,
+        &start,
+        &cfg.camera,
+        &cfg.mapping,
+        &env,
+        &cfg.clearance,
+    )
+    .unwrap();
+    println!("repairs: {:?}", plan.repairs);
+    assert!(!plan.repairs.is_empty());
+    assert!(plan.clearance.unwrap().is_clear());
+    assert!(
+        plan.coverage_gaps().is_empty(),
+        "{:?}",
+        plan.coverage_gaps()
+    );
+    let (traj, report, _) = plan_clear_trajectory(
+        &plan.path,
+        &StartState::default(),
+        &cfg.min_snap,
+        &env,
+        &cfg.clearance,
+    )
+    .unwrap();
+    assert!(report.is_clear() && report.min_clearance_m.unwrap() >= 1.5);
+    assert!(traj.duration_s() > 0.0);
+}
+
+#[test]
+fn blocked_ring_is_rejected_with_a_reason() {
+    // A wide, tall wall of rock around the target: no ring within 10 m of raise clears it.
+    let env = Environment::new(
+        None,
+        &[Obstacle::Cylinder {
+            center_x_m: 0.0,
+            center_y_m: 0.0,
+            radius_m: 30.0,
+            z_bottom_m: -1.0,
+            z_top_m: 40.0,
+        }],
+    )
+    .unwrap();
+    let cfg = PlanningConfig::default();
+    let cyl = VerticalCylinder::new(0.0, 0.0, 1.0, 0.0, 2.0).unwrap();
+    let start = Waypoint::new(Point3::new(-10.0, 0.0, 10.0), 0.0);
+    let err = plan_mapping_rings_clear(
+        &cyl,
+        &start,
+        &cfg.camera,
+        &cfg.mapping,
+        &env,
+        &cfg.clearance,
+    )
+    .unwrap_err();
+    println!("{err}");
+    match err {
+        PlanError::Clearance {
+            reason,
+            source_name,
+            ..
+        } => {
+            assert!(reason.contains("ring 0"), "{reason}");
+            assert_eq!(source_name, "obstacle 0");
+        }
+        other => panic!("unexpected {other}"),
+    }
+}
+
+#[test]
+fn corner_bulge_is_pulled_back_by_inserted_waypoints() {
+    // Min-snap through a 90° corner bulges about 0.17 m outward just before the corner; a
+    // boulder sits 1.62 m from the straight leg, where the bulge passes.
+    let terrain = Heightfield::flat(-20.0, -20.0, 1.0, 41, 41, 0.0).unwrap();
+    let boulder = Obstacle::Cylinder {
+        center_x_m: 9.35,
+        center_y_m: -1.72,
+        radius_m: 0.1,
+        z_bottom_m: 0.0,
+        z_top_m: 8.0,
+    };
+    let env = Environment::new(Some(terrain), &[boulder]).unwrap();
+    let cfg = PlanningConfig::default();
+    let path = Path::new(vec![
+        Waypoint::new(Point3::new(0.0, 0.0, 5.0), 0.0),
+        Waypoint::new(Point3::new(10.0, 0.0, 5.0), 0.0),
+        Waypoint::new(Point3::new(10.0, 10.0, 5.0), 0.0),
+    ]);
+    assert!(env.check_path(&path, &cfg.clearance).is_clear());
+    let naive = plan_min_snap(&path, &StartState::default(), &cfg.min_snap).unwrap();
+    assert!(
+        !env.check_trajectory(&naive, &cfg.clearance).is_clear(),
+        "fixture must violate"
+    );
+    let (traj, report, repairs) = plan_clear_trajectory(
+        &path,
+        &StartState::default(),
+        &cfg.min_snap,
+        &env,
+        &cfg.clearance,
+    )
+    .unwrap();
+    println!(
+        "corner: min clearance {:?}, repairs {repairs:?}",
+        report.min_clearance_m
+    );
+    assert!(!repairs.is_empty());
+    assert!(report.is_clear());
+    assert!(env.check_trajectory(&traj, &cfg.clearance).is_clear());
+    // The original waypoints are still visited.
+    for w in &path.waypoints {
+        let hit = traj
+            .knot_times_s()
+            .iter()
+            .any(|&t| (traj.sample(t).position_m - w.position_m).norm() < 1e-9);
+        assert!(hit);
+    }
+}
+
+#[test]
+fn path_through_a_rock_is_rejected() {
+    let (env, _) = common::two_metre_rock();
+    let cfg = PlanningConfig::default();
+    let through = Path::new(vec![
+        Waypoint::new(Point3::new(-8.0, 0.0, 1.8), 0.0),
+        Waypoint::new(Point3::new(8.0, 0.0, 1.8), 0.0),
+    ]);
+    let err = plan_clear_trajectory(
+        &through,
+        &StartState::default(),
+        &cfg.min_snap,
+        &env,
+        &cfg.clearance,
+    )
+    .unwrap_err();
+    println!("{err}");
+    assert!(err.to_string().contains("obstacle 0"), "{err}");
+}
+
+#[test]
+fn lawn_mower_over_a_hill_is_raised() {
+    let terrain = Heightfield::from_fn(-10.0, -10.0, 2.0, 111, 111, |x, y| {
+        12.0 * (-((x - 100.0).powi(2) + (y - 50.0).powi(2)) / 400.0).exp()
+    })
+    .unwrap();
+    let env = Environment::new(Some(terrain), &[]).unwrap();
+    let cfg = PlanningConfig::default();
+    let area = SearchArea::Rectangle {
+        min_x_m: 0.0,
+        min_y_m: 0.0,
+        max_x_m: 200.0,
+        max_y_m: 100.0,
+    };
+    let plan = plan_lawn_mower_clear(
+        &area,
+        13.0,
+        &cfg.camera,
+        &cfg.coverage,
+        &env,
+        &cfg.clearance,
+    )
+    .unwrap();
+    println!(
+        "lawn-mower: altitude {} m, {} lanes, repairs {:?}",
+        plan.altitude_m, plan.lanes, plan.repairs
+    );
+    assert!(plan.altitude_m > 13.0);
+    assert!(plan.clearance.unwrap().is_clear());
+    let low = plan_lawn_mower_clear(&area, 5.0, &cfg.camera, &cfg.coverage, &env, &cfg.clearance);
+    assert!(low.is_err());
+}
+
+#[test]
+fn bad_input_gives_clear_errors() {
+    let cfg = PlanningConfig::default();
+    let terrain = Heightfield::flat(-20.0, -20.0, 1.0, 41, 41, 10.0).unwrap();
+    let env = Environment::new(Some(terrain), &[]).unwrap();
+    let start = Waypoint::new(Point3::new(-10.0, 0.0, 20.0), 0.0);
+
+    // Target below the terrain.
+    let buried = VerticalCylinder::new(0.0, 0.0, 1.0, 2.0, 4.0).unwrap();
+    let err = plan_mapping_rings_clear(
+        &buried,
+        &start,
+        &cfg.camera,
+        &cfg.mapping,
+        &env,
+        &cfg.clearance,
+    )
+    .unwrap_err();
+    assert!(matches!(err, PlanError::TargetBelowTerrain { .. }), "{err}");
+    assert!(err.to_string().contains("below the terrain"), "{err}");
+    let pts: Vec<Point3<f64>> = (0..30)
+        .map(|k| {
+            Point3::new(
+                (k % 5) as f64 * 0.3,
+                (k / 5) as f64 * 0.2,
+                3.0 + (k % 3) as f64 * 0.1,
+            )
+        })
+        .collect();
+    let err = plan_fine_localization_clear(
+        &pts,
+        &start,
+        30.0,
+        &cfg.camera,
+        &cfg.fine_localize,
+        &env,
+        &cfg.clearance,
+    )
+    .unwrap_err();
+    assert!(matches!(err, PlanError::TargetBelowTerrain { .. }), "{err}");
+
+    // Zero radius.
+    let err = VerticalCylinder::new(0.0, 0.0, 0.0, 10.0, 12.0).unwrap_err();
+    assert!(err.to_string().contains("radius_m"), "{err}");
+    let zero_standoff = MappingRingConfig {
+        standoff_m: 0.0,
+        ..cfg.mapping
+    };
+    let ok_cyl = VerticalCylinder::new(0.0, 0.0, 1.0, 10.0, 12.0).unwrap();
+    let err = plan_mapping_rings(&ok_cyl, &start, &cfg.camera, &zero_standoff).unwrap_err();
+    assert!(err.to_string().contains("mapping.standoff_m"), "{err}");
+    let mut bad_cyl = ok_cyl;
+    bad_cyl.radius_m = 0.0;
+    assert!(plan_mapping_rings(&bad_cyl, &start, &cfg.camera, &cfg.mapping).is_err());
+
+    // NaN waypoints and points.
+    let nan_start = Waypoint::new(Point3::new(f64::NAN, 0.0, 20.0), 0.0);
+    let err = plan_mapping_rings(&ok_cyl, &nan_start, &cfg.camera, &cfg.mapping).unwrap_err();
+    assert!(err.to_string().contains("start.position_m.x"), "{err}");
+    let mut nan_pts = pts.clone();
+    nan_pts[7].z = f64::NAN;
+    let err = plan_fine_localization(&nan_pts, &start, 30.0, &cfg.camera, &cfg.fine_localize)
+        .unwrap_err();
+    assert!(err.to_string().contains("points[7].z"), "{err}");
+    let err = VerticalCylinder::bounding(&nan_pts).unwrap_err();
+    assert!(matches!(err, PlanError::NonFinite { .. }));
+
+    // Malformed terrain and obstacles.
+    assert!(
+        Environment::new(
+            Some(Heightfield {
+                heights_m: vec![0.0; 5],
+                ..Heightfield::flat(0.0, 0.0, 1.0, 3, 3, 0.0).unwrap()
+            }),
+            &[]
+        )
+        .is_err()
+    );
+    let bad_mesh = Obstacle::Mesh {
+        positions_m: vec![[0.0; 3]; 3],
+        faces: vec![[0, 1, 5]],
+    };
+    let err = Environment::new(None, &[bad_mesh]).unwrap_err();
+    assert!(err.to_string().contains("obstacle 0"), "{err}");
+}
