@@ -6,3 +6,4 @@
 //! [`scarp_export`] and synthetic worlds in [`scarp_datasets`].
 
 pub mod cli;
+pub mod fragility;

@@ -1,6 +1,7 @@
 //! The `scarp` command line: one module per subcommand, each with its own clap `Args` struct and a
 //! `run` function.
 
+pub mod fragility;
 pub mod render;
 pub mod simulate;
 pub mod world;
@@ -23,6 +24,9 @@ pub struct Cli {
 /// The subcommands.
 #[derive(Debug, Subcommand)]
 pub enum Command {
+    /// Fragility of a rock mesh: contact, mass properties, rocking angles α(θ), α_min and the
+    /// toppling acceleration g·tan(α_min).
+    Fragility(fragility::FragilityArgs),
     /// Run the simulated mission on a world (the main job).
     Simulate(simulate::SimulateArgs),
     /// Render a camera path through a world into a TUM RGB-D sequence.
@@ -38,6 +42,7 @@ pub enum Command {
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     init_logging(&cli.log);
     match cli.command {
+        Command::Fragility(args) => fragility::run(args),
         Command::Simulate(args) => simulate::run(args),
         Command::Render(args) => render::run(args),
         Command::World(args) => world::run(args),

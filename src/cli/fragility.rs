@@ -1,0 +1,276 @@
+//! `scarp fragility`: fragility analysis of a rock mesh (see [`crate::fragility`]).
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, bail};
+use scarp_slam::TriangleMesh;
+
+use crate::fragility::{
+    ContactSpec, FragilityConfig, FragilityReport, analyze_detailed, figure::write_figure,
+};
+
+/// Arguments of `scarp fragility`.
+#[derive(Debug, clap::Args)]
+pub struct FragilityArgs {
+    /// Closed rock mesh, metres (PLY or OBJ).
+    pub mesh: PathBuf,
+    /// Up direction in the mesh's frame as `x,y,z` (default `0,0,1`, or the config file's).
+    #[arg(long, value_parser = parse_vector, allow_hyphen_values = true)]
+    pub up: Option<[f64; 3]>,
+    /// Height of the basal contact along up, metres; without it (and without `--pedestal`) the
+    /// contact is found automatically as the neck of the cross-section area profile.
+    #[arg(long, allow_hyphen_values = true, conflicts_with = "pedestal")]
+    pub contact_height: Option<f64>,
+    /// Closed pedestal mesh in the rock's frame; the contact is the pedestal's top.
+    #[arg(long)]
+    pub pedestal: Option<PathBuf>,
+    /// Print the full report as JSON on stdout instead of a summary.
+    #[arg(long)]
+    pub json: bool,
+    /// Write a figure (side silhouette and polar plot of α(θ)); `.svg` or `.png`.
+    #[arg(long)]
+    pub figure: Option<PathBuf>,
+    /// TOML file with a `FragilityConfig` (any subset of its fields).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Seed of the perturbation study (overrides the config file).
+    #[arg(long)]
+    pub seed: Option<u64>,
+}
+
+/// Parses `x,y,z`.
+fn parse_vector(text: &str) -> Result<[f64; 3], String> {
+    let parts: Vec<&str> = text.split(',').map(str::trim).collect();
+    if parts.len() != 3 {
+        return Err(format!(
+            "expected three comma-separated numbers, got `{text}`"
+        ));
+    }
+    let mut v = [0.0; 3];
+    for (slot, part) in v.iter_mut().zip(&parts) {
+        *slot = part
+            .parse()
+            .map_err(|e| format!("`{part}` in `{text}` is not a number: {e}"))?;
+    }
+    Ok(v)
+}
+
+/// Reads a mesh file, choosing the reader by extension.
+fn read_mesh(path: &Path) -> anyhow::Result<TriangleMesh> {
+    let ext = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase())
+        .unwrap_or_default();
+    match ext.as_str() {
+        "ply" => scarp_export::ply::read_mesh(path)
+            .with_context(|| format!("reading mesh {}", path.display())),
+        "obj" => scarp_export::obj::read_obj(path)
+            .with_context(|| format!("reading mesh {}", path.display())),
+        _ => bail!(
+            "mesh {}: unsupported format `.{ext}` (supported: .ply, .obj)",
+            path.display()
+        ),
+    }
+}
+
+/// Loads the configuration file (if any) and applies the command-line overrides.
+fn load_config(args: &FragilityArgs) -> anyhow::Result<FragilityConfig> {
+    let mut config = match &args.config {
+        Some(path) => {
+            let text = std::fs::read_to_string(path)
+                .with_context(|| format!("reading config {}", path.display()))?;
+            toml::from_str(&text).with_context(|| format!("parsing config {}", path.display()))?
+        }
+        None => FragilityConfig::default(),
+    };
+    if let Some(up) = args.up {
+        config.up = up;
+    }
+    if let Some(seed) = args.seed {
+        config.uncertainty.seed = seed;
+    }
+    Ok(config)
+}
+
+/// A short human-readable summary of a report.
+pub fn summary(report: &FragilityReport) -> String {
+    let pair = &report.alpha_min_pair;
+    format!(
+        "alpha_min           {:.2}° ± {:.2}° (1σ of {} perturbed runs), tipping towards azimuth {:.1}°\n\
+         opposite direction  {:.2}°\n\
+         toppling PGA        {:.3} g ({:.2} m/s²)\n\
+         contact             {:?} at {:.4} m, area {:.4} m² (section {:.4} m²)\n\
+         centre of mass      [{:.4}, {:.4}, {:.4}] m, {:.4} m above the contact\n\
+         volume, mass        {:.4} m³, {:.1} kg at {} kg/m³\n\
+         height/width        {:.2} ({:.3} m / {:.3} m)\n\
+         Purvance p          {:.3} rad/s (R = {:.3} m)\n",
+        report.alpha_min_deg,
+        report.alpha_min_spread_deg,
+        report.uncertainty.samples - report.uncertainty.failed_samples,
+        report.alpha_min_azimuth_deg,
+        pair.opposite_alpha_deg,
+        report.toppling_pga_g,
+        report.toppling_pga_m_s2,
+        report.contact_method,
+        report.contact_height_m,
+        report.contact_area_m2,
+        report.section_area_m2,
+        report.center_of_mass[0],
+        report.center_of_mass[1],
+        report.center_of_mass[2],
+        report.com_height_above_contact_m,
+        report.volume_m3,
+        report.mass_kg,
+        report.density_kg_m3,
+        report.height_to_width,
+        report.rock_height_m,
+        report.contact_width_m,
+        report.purvance_p_rad_s,
+        report.rocking_radius_m,
+    )
+}
+
+/// Runs `scarp fragility`.
+///
+/// # Errors
+/// Unreadable or invalid meshes or config, analysis failures (named by [`FragilityError`]) and
+/// figure write errors, each with the path at fault.
+///
+/// [`FragilityError`]: crate::fragility::FragilityError
+pub fn run(args: FragilityArgs) -> anyhow::Result<()> {
+    let config = load_config(&args)?;
+    let mesh = read_mesh(&args.mesh)?;
+    let pedestal = args.pedestal.as_deref().map(read_mesh).transpose()?;
+    let contact = match (&pedestal, args.contact_height) {
+        (Some(p), _) => ContactSpec::Pedestal(p),
+        (None, Some(h)) => ContactSpec::Height(h),
+        (None, None) => ContactSpec::Auto,
+    };
+    tracing::info!(mesh = %args.mesh.display(), faces = mesh.faces.len(), "fragility analysis");
+    let analysis = analyze_detailed(&mesh, contact, &config)
+        .with_context(|| format!("analysing {}", args.mesh.display()))?;
+    if let Some(path) = &args.figure {
+        write_figure(&analysis, path)?;
+        tracing::info!(figure = %path.display(), "figure written");
+    }
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&analysis.report)?);
+    } else {
+        print!("{}", summary(&analysis.report));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[test]
+    fn parses_vectors_and_arguments() {
+        assert_eq!(parse_vector("0, 0,1").unwrap(), [0.0, 0.0, 1.0]);
+        assert!(parse_vector("0,1").is_err());
+        assert!(parse_vector("a,b,c").is_err());
+        let cli = crate::cli::Cli::try_parse_from([
+            "scarp",
+            "fragility",
+            "rock.obj",
+            "--up",
+            "0,0,-1",
+            "--contact-height",
+            "-0.25",
+            "--json",
+        ])
+        .unwrap();
+        let crate::cli::Command::Fragility(args) = cli.command else {
+            panic!("parsed as another subcommand");
+        };
+        assert_eq!(args.up, Some([0.0, 0.0, -1.0]));
+        assert_eq!(args.contact_height, Some(-0.25));
+        assert!(args.json);
+        assert!(
+            crate::cli::Cli::try_parse_from([
+                "scarp",
+                "fragility",
+                "r.obj",
+                "--contact-height",
+                "1",
+                "--pedestal",
+                "p.obj"
+            ])
+            .is_err()
+        );
+    }
+
+    #[test]
+    fn runs_on_an_obj_block_with_figure() {
+        let dir = tempfile::tempdir().unwrap();
+        let mesh = dir.path().join("block.obj");
+        let mut text = String::new();
+        for i in 0..8 {
+            let (x, y, z) = (i & 1, (i >> 1) & 1, ((i >> 2) & 1) * 2);
+            text += &format!("v {x} {y} {z}\n");
+        }
+        for f in [
+            [0, 2, 1],
+            [1, 2, 3],
+            [4, 5, 6],
+            [5, 7, 6],
+            [0, 1, 4],
+            [1, 5, 4],
+            [2, 6, 3],
+            [3, 6, 7],
+            [0, 4, 2],
+            [2, 4, 6],
+            [1, 3, 5],
+            [3, 7, 5],
+        ] {
+            text += &format!("f {} {} {}\n", f[0] + 1, f[1] + 1, f[2] + 1);
+        }
+        std::fs::write(&mesh, text).unwrap();
+        let figure = dir.path().join("out.svg");
+        let args = FragilityArgs {
+            mesh,
+            up: None,
+            contact_height: None,
+            pedestal: None,
+            json: true,
+            figure: Some(figure.clone()),
+            config: None,
+            seed: Some(3),
+        };
+        run(args).unwrap();
+        assert!(std::fs::read_to_string(figure).unwrap().contains("<svg"));
+        let missing = FragilityArgs {
+            mesh: dir.path().join("missing.obj"),
+            up: None,
+            contact_height: None,
+            pedestal: None,
+            json: false,
+            figure: None,
+            config: None,
+            seed: None,
+        };
+        let e = run(missing).unwrap_err();
+        assert!(format!("{e:#}").contains("missing.obj"));
+    }
+
+    #[test]
+    fn runs_on_the_real_rock_ply() {
+        let dir = tempfile::tempdir().unwrap();
+        let figure = dir.path().join("rock.png");
+        let args = FragilityArgs {
+            mesh: Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("../shared/data/rocks/double_rock.ply"),
+            up: Some([0.0, 0.0, 1.0]),
+            contact_height: Some(-0.06),
+            pedestal: None,
+            json: true,
+            figure: Some(figure.clone()),
+            config: None,
+            seed: None,
+        };
+        run(args).unwrap();
+        assert!(std::fs::metadata(figure).unwrap().len() > 1000);
+    }
+}

@@ -1,0 +1,698 @@
+//! # Fragility of a precariously balanced rock
+//!
+//! From a closed rock mesh (reconstructed or ground truth) and the up direction, this module
+//! finds the basal contact, cuts the rock above it and closes the cut, integrates the mass
+//! properties, and derives the rocking angles α(θ) around the convex contact polygon:
+//! α_min with its azimuth, the opposite-direction pairs, the quasi-static toppling acceleration
+//! g·tan(α_min), the height-to-width ratio, Purvance's p, and the spread of α_min under
+//! perturbation of the contact height and the mesh.
+//!
+//! ## Frames and units
+//! - Input meshes are in any right-handed frame in metres (world ENU by convention). The
+//!   *levelled frame* is that frame rotated about the origin by the smallest rotation that takes
+//!   [`FragilityConfig::up`] to +z; for the default up (+z) the two frames coincide.
+//! - Heights (`contact_height_m`, [`ContactSpec::Height`]) are coordinates along up, that is
+//!   levelled z.
+//! - Azimuths are degrees counter-clockwise from levelled +x towards levelled +y (for up = +z:
+//!   from east towards north), in [0, 360). The azimuth of α(θ) is the direction in which the
+//!   rock would tip.
+//! - Positions, the centre of mass and the inertia tensor in the report are in the input frame.
+//!
+//! ## Steps and their failure cases
+//! 1. The mesh is checked: NaN, bad indices, no faces, open, non-manifold or inconsistently
+//!    wound surfaces are errors ([`FragilityError`]). Documented repairs, reported in
+//!    [`MeshRepairs`]: vertices at bit-identical positions are welded, faces that repeat a vertex
+//!    are dropped, and shells wound inwards are flipped.
+//! 2. The contact ([`ContactSpec`]): the neck of the horizontal cross-section area profile, a
+//!    given height, or the top of a given pedestal mesh.
+//! 3. The rock is cut just above the contact plane and closed by triangulating the section
+//!    polygons (ear clipping after bridging holes), then volume, centre of mass and inertia come
+//!    from signed tetrahedra at uniform density.
+//! 4. The contact polygon is the convex hull of the rock's section at the contact (plus vertices
+//!    within [`FragilityConfig::contact_band_m`] above it), clipped by the convex hull of
+//!    whatever supports it from below (the pedestal's top or the mesh's own section just below).
+//! 5. α(θ) = atan(r(θ)/H) for [`FragilityConfig::azimuth_count`] azimuths, where r(θ) is the
+//!    horizontal distance from the centre of mass to the supporting line of the contact polygon
+//!    in direction θ and H the height of the centre of mass above the contact. α_min is the
+//!    exact minimum over all directions (the centre of mass's distance to the nearest hull
+//!    edge), so it is never above the smallest sampled α.
+//!
+//! ```
+//! use nalgebra::Point3;
+//! use scarp::fragility::{ContactSpec, FragilityConfig, analyze};
+//! use scarp_slam::TriangleMesh;
+//!
+//! // A 1 m × 1 m × 2 m block standing on its base at z = 0.
+//! let (b, h) = (1.0f32, 2.0f32);
+//! let positions = (0..8)
+//!     .map(|i| Point3::new(
+//!         if i & 1 == 0 { 0.0 } else { b },
+//!         if i & 2 == 0 { 0.0 } else { b },
+//!         if i & 4 == 0 { 0.0 } else { h },
+//!     ))
+//!     .collect();
+//! let faces = vec![
+//!     [0, 2, 1], [1, 2, 3], [4, 5, 6], [5, 7, 6], [0, 1, 4], [1, 5, 4],
+//!     [2, 6, 3], [3, 6, 7], [0, 4, 2], [2, 4, 6], [1, 3, 5], [3, 7, 5],
+//! ];
+//! let block = TriangleMesh::new(positions, faces).unwrap();
+//! let report = analyze(&block, ContactSpec::Auto, &FragilityConfig::default()).unwrap();
+//! // α = atan(b/h) in each of the four face directions.
+//! assert!((report.alpha_min_deg - 0.5f64.atan().to_degrees()).abs() < 0.05);
+//! assert!((report.toppling_pga_g - 0.5).abs() < 1e-6);
+//! assert_eq!(report.alpha_deg.len(), 360);
+//! let json = serde_json::to_string(&report).unwrap();
+//! assert!(json.contains("\"alpha_min_deg\""));
+//! ```
+
+mod contact;
+mod error;
+pub mod figure;
+pub mod mass;
+#[cfg(test)]
+mod real_rock;
+pub mod rocking;
+mod section;
+#[cfg(test)]
+pub(crate) mod test_shapes;
+#[cfg(test)]
+mod tests;
+mod topology;
+pub mod uncertainty;
+
+use nalgebra::{Matrix3, Point2, Point3, Rotation3, Unit, Vector2, Vector3};
+use scarp_slam::TriangleMesh;
+use serde::{Deserialize, Serialize};
+
+pub use error::FragilityError;
+pub use mass::{MassProperties, mass_properties};
+pub use rocking::MinimumSupport;
+pub use topology::MeshRepairs;
+pub use uncertainty::{UncertaintyConfig, UncertaintyReport};
+
+use section::{Cut, cut_above};
+use topology::{Solid, prepare};
+use uncertainty::{SampleSupport, alpha_min_spread};
+
+/// Settings of the fragility analysis. Every field has a documented default;
+/// `FragilityConfig::default()` is what `scarp fragility` uses.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct FragilityConfig {
+    /// Up direction in the mesh's frame (need not be unit length). Default `[0, 0, 1]` (ENU z).
+    pub up: [f64; 3],
+    /// Uniform rock density, kg/m³. Default 2650 (granite, as in the design).
+    pub density_kg_m3: f64,
+    /// Number of evenly spaced azimuths for α(θ); must be even (for opposite pairs) and ≥ 4.
+    /// Default 360.
+    pub azimuth_count: usize,
+    /// Gravitational acceleration, m/s². Default 9.80665 (standard gravity).
+    pub g_m_s2: f64,
+    /// Number of heights at which the automatic contact search samples the cross-section area.
+    /// Default 256.
+    pub profile_levels: usize,
+    /// The automatic search accepts a neck only if the widest sections both below and above it
+    /// are at least this many times its area; otherwise the rock rests on its lowest points.
+    /// Default 1.5.
+    pub neck_min_area_ratio: f64,
+    /// Relative area tolerance of the neck floor: the contact is the highest height whose section
+    /// is within this fraction of the narrowest one (so a straight column counts as pedestal).
+    /// Default 0.01.
+    pub neck_plateau_tolerance: f64,
+    /// Vertices within this height of the contact plane (above it for the rock, below it for the
+    /// support) also count as touching; covers a rough base resting on the ground. Metres.
+    /// Default 0.001.
+    pub contact_band_m: f64,
+    /// Largest gap between the rock's lowest point and the pedestal's top that is still treated
+    /// as contact (the rock is lowered onto the pedestal), metres. Default 0.01.
+    pub pedestal_gap_tolerance_m: f64,
+    /// The perturbation study for `alpha_min_spread_deg`.
+    pub uncertainty: UncertaintyConfig,
+}
+
+impl Default for FragilityConfig {
+    fn default() -> Self {
+        Self {
+            up: [0.0, 0.0, 1.0],
+            density_kg_m3: 2650.0,
+            azimuth_count: 360,
+            g_m_s2: 9.80665,
+            profile_levels: 256,
+            neck_min_area_ratio: 1.5,
+            neck_plateau_tolerance: 0.01,
+            contact_band_m: 0.001,
+            pedestal_gap_tolerance_m: 0.01,
+            uncertainty: UncertaintyConfig::default(),
+        }
+    }
+}
+
+fn invalid(field: &'static str, value: impl ToString, reason: &'static str) -> FragilityError {
+    FragilityError::InvalidConfig {
+        field,
+        value: value.to_string(),
+        reason,
+    }
+}
+
+impl FragilityConfig {
+    /// Checks every field's range.
+    ///
+    /// # Errors
+    /// [`FragilityError::InvalidConfig`] naming the first field out of range.
+    pub fn validate(&self) -> Result<(), FragilityError> {
+        let up = Vector3::from(self.up);
+        if !(up.iter().all(|c| c.is_finite()) && up.norm() > 1e-12) {
+            return Err(invalid(
+                "up",
+                format!("{:?}", self.up),
+                "must be a finite non-zero vector",
+            ));
+        }
+        let positive = |field, v: f64| {
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                Err(invalid(field, v, "must be positive and finite"))
+            }
+        };
+        let non_negative = |field, v: f64| {
+            if v.is_finite() && v >= 0.0 {
+                Ok(())
+            } else {
+                Err(invalid(field, v, "must be non-negative and finite"))
+            }
+        };
+        positive("density_kg_m3", self.density_kg_m3)?;
+        positive("g_m_s2", self.g_m_s2)?;
+        positive("neck_min_area_ratio", self.neck_min_area_ratio)?;
+        non_negative("neck_plateau_tolerance", self.neck_plateau_tolerance)?;
+        non_negative("contact_band_m", self.contact_band_m)?;
+        non_negative("pedestal_gap_tolerance_m", self.pedestal_gap_tolerance_m)?;
+        non_negative(
+            "uncertainty.contact_height_sigma_m",
+            self.uncertainty.contact_height_sigma_m,
+        )?;
+        non_negative(
+            "uncertainty.mesh_noise_sigma_m",
+            self.uncertainty.mesh_noise_sigma_m,
+        )?;
+        if self.azimuth_count < 4 || !self.azimuth_count.is_multiple_of(2) {
+            return Err(invalid(
+                "azimuth_count",
+                self.azimuth_count,
+                "must be even and at least 4",
+            ));
+        }
+        if self.profile_levels < 8 {
+            return Err(invalid(
+                "profile_levels",
+                self.profile_levels,
+                "must be at least 8",
+            ));
+        }
+        Ok(())
+    }
+
+    /// The rotation taking the input frame to the levelled frame (up to +z).
+    fn levelled_from_input(&self) -> Rotation3<f64> {
+        let up = Vector3::from(self.up);
+        Rotation3::rotation_between(&up, &Vector3::z()).unwrap_or_else(|| {
+            // Only `up` anti-parallel to +z has no unique smallest rotation: turn half about x.
+            Rotation3::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI)
+        })
+    }
+}
+
+/// How to find the basal contact.
+#[derive(Debug, Clone, Copy)]
+pub enum ContactSpec<'a> {
+    /// The neck of the cross-section area profile between the rock and its pedestal or the
+    /// ground, when the mesh includes them; without a neck, the rock's lowest points (within
+    /// [`FragilityConfig::contact_band_m`]).
+    Auto,
+    /// A given height along up, metres (levelled z). The rock is the part of the mesh above it.
+    Height(f64),
+    /// A separate closed pedestal mesh in the rock's frame. The contact plane is the pedestal's
+    /// highest point under the rock (or the rock's lowest point, if it floats above the pedestal
+    /// by at most [`FragilityConfig::pedestal_gap_tolerance_m`]); the contact polygon is the rock's
+    /// base there clipped by the pedestal's top.
+    Pedestal(&'a TriangleMesh),
+}
+
+/// How the contact was found.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ContactMethod {
+    /// The neck of the area profile (automatic).
+    Neck,
+    /// The rock's lowest points (automatic, no neck found).
+    Base,
+    /// A given height.
+    Height,
+    /// The top of a pedestal mesh.
+    Pedestal,
+}
+
+/// α in two opposite directions.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct OppositePair {
+    /// Azimuth of the first direction, degrees in [0, 180) (or the α_min azimuth).
+    pub azimuth_deg: f64,
+    /// α towards `azimuth_deg`, degrees.
+    pub alpha_deg: f64,
+    /// α towards `azimuth_deg + 180°`, degrees.
+    pub opposite_alpha_deg: f64,
+}
+
+/// The result of [`analyze`]; the JSON of `scarp fragility --json`. Frames and units as in the
+/// [module documentation](self).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FragilityReport {
+    /// The smallest rocking angle over all directions, degrees (exact, not sampled).
+    pub alpha_min_deg: f64,
+    /// Azimuth in which the rock tips at α_min, degrees.
+    pub alpha_min_azimuth_deg: f64,
+    /// Quasi-static toppling peak ground acceleration, in units of g: tan(α_min).
+    pub toppling_pga_g: f64,
+    /// The same in m/s²: g·tan(α_min).
+    pub toppling_pga_m_s2: f64,
+    /// Volume of the rock above the contact, m³.
+    pub volume_m3: f64,
+    /// Mass of the rock, kg.
+    pub mass_kg: f64,
+    /// Density used, kg/m³.
+    pub density_kg_m3: f64,
+    /// Centre of mass, metres, input frame.
+    pub center_of_mass: [f64; 3],
+    /// Height of the centre of mass above the contact plane, metres.
+    pub com_height_above_contact_m: f64,
+    /// Height of the contact plane along up, metres.
+    pub contact_height_m: f64,
+    /// How the contact was found.
+    pub contact_method: ContactMethod,
+    /// Area of the convex contact polygon, m².
+    pub contact_area_m2: f64,
+    /// Area of the rock's cross-section at the contact (non-convex, holes subtracted), m².
+    pub section_area_m2: f64,
+    /// Vertices of the convex contact polygon, counter-clockwise seen from above, metres, input
+    /// frame.
+    pub contact_polygon: Vec<[f64; 3]>,
+    /// Height of the rock from the contact plane to its top, metres.
+    pub rock_height_m: f64,
+    /// Width of the contact polygon along the α_min azimuth, metres.
+    pub contact_width_m: f64,
+    /// `rock_height_m / contact_width_m`.
+    pub height_to_width: f64,
+    /// α(θ) in degrees for θ = i·360°/n, i = 0..n (n = `azimuth_count`, default 360).
+    pub alpha_deg: Vec<f64>,
+    /// α for each pair of opposite sampled directions, θ in [0°, 180°).
+    pub opposite_pairs: Vec<OppositePair>,
+    /// The pair through the α_min azimuth.
+    pub alpha_min_pair: OppositePair,
+    /// Inertia tensor about the centre of mass, kg·m², input-frame axes.
+    pub inertia_kg_m2: [[f64; 3]; 3],
+    /// Distance from the centre of mass to the α_min rocking axis, metres (Purvance's R).
+    pub rocking_radius_m: f64,
+    /// Moment of inertia about the α_min rocking axis, kg·m² (Purvance's I_O).
+    pub inertia_about_rocking_axis_kg_m2: f64,
+    /// Purvance's frequency parameter p = √(m g R / I_O), rad/s.
+    pub purvance_p_rad_s: f64,
+    /// Standard deviation of α_min under perturbation, degrees (0 when the study is off).
+    pub alpha_min_spread_deg: f64,
+    /// Details of the perturbation study.
+    pub uncertainty: UncertaintyReport,
+    /// Up direction used, unit vector, input frame.
+    pub up: [f64; 3],
+    /// Repairs made to the rock mesh.
+    pub repairs: MeshRepairs,
+}
+
+/// A report together with the levelled geometry behind it, for figures.
+#[derive(Debug, Clone)]
+pub struct FragilityAnalysis {
+    /// The report.
+    pub report: FragilityReport,
+    /// The rock cut above the contact and closed, levelled frame.
+    pub(crate) rock: Solid,
+    /// The body below the contact (pedestal mesh, or the part of the input mesh below it).
+    pub(crate) support: Option<Solid>,
+    /// Convex contact polygon, levelled xy.
+    pub(crate) contact_hull: Vec<Point2<f64>>,
+    /// Centre of mass, levelled frame.
+    pub(crate) com: Point3<f64>,
+    /// Contact height, levelled z.
+    pub(crate) contact_height: f64,
+    /// α_min azimuth, radians.
+    pub(crate) alpha_min_azimuth: f64,
+    input_from_levelled: Rotation3<f64>,
+}
+
+impl FragilityAnalysis {
+    /// The closed rock above the contact (section triangulated), in the input frame, metres.
+    pub fn closed_rock(&self) -> TriangleMesh {
+        self.rock.to_mesh(&self.input_from_levelled)
+    }
+}
+
+/// Where the support polygon under the rock comes from.
+pub(crate) enum Support<'a> {
+    /// The part of this solid just below the contact plane.
+    Below(&'a Solid),
+    /// A fixed convex polygon (levelled xy).
+    Fixed(&'a [Point2<f64>]),
+}
+
+/// One evaluation of the rock at a contact height.
+pub(crate) struct Evaluation {
+    pub cut: Cut,
+    pub mass: MassProperties,
+    pub contact_height: f64,
+    pub hull: Vec<Point2<f64>>,
+    pub min: MinimumSupport,
+    pub com_height: f64,
+    pub alpha_min_rad: f64,
+}
+
+/// Cuts `rock` at `h` (raised to its lowest point if below it), closes it, integrates its mass
+/// and finds the contact polygon and the exact α_min (negative when the centre of mass lies
+/// outside the contact).
+pub(crate) fn evaluate(
+    rock: &Solid,
+    h: f64,
+    support: &Support<'_>,
+    band_m: f64,
+    config: &FragilityConfig,
+) -> Result<Evaluation, FragilityError> {
+    let (z_min, z_max) = rock
+        .z_range()
+        .ok_or(FragilityError::EmptyMesh { mesh: "rock" })?;
+    if !h.is_finite() || h >= z_max {
+        return Err(FragilityError::ContactOutsideRock {
+            contact_height_m: h,
+            z_min_m: z_min,
+            z_max_m: z_max,
+        });
+    }
+    let h = h.max(z_min);
+    let cut = cut_above(rock, h)?;
+    let integrals = mass::integrate(&cut.solid)?;
+    let mass = MassProperties::from_integrals(&integrals, config.density_kg_m3);
+    let upper = rocking::convex_hull(&contact::points_above(&cut.solid, h, band_m));
+    let lower = match support {
+        Support::Below(full) => {
+            if full.z_range().is_some_and(|(lo, _)| lo < h) {
+                rocking::convex_hull(&contact::points_below(full, h, band_m, false))
+            } else {
+                Vec::new()
+            }
+        }
+        Support::Fixed(hull) => hull.to_vec(),
+    };
+    let hull = if lower.len() >= 3 && upper.len() >= 3 {
+        rocking::clip_convex(&upper, &lower)
+    } else {
+        upper
+    };
+    let com = mass.center_of_mass;
+    let min = rocking::minimum_support(&hull, &com.xy()).ok_or_else(|| {
+        FragilityError::Degenerate(format!(
+            "the rock and its support do not overlap at the contact height {h} m"
+        ))
+    })?;
+    let com_height = com.z - h;
+    Ok(Evaluation {
+        alpha_min_rad: min.distance_m.atan2(com_height),
+        cut,
+        mass,
+        contact_height: h,
+        hull,
+        min,
+        com_height,
+    })
+}
+
+/// Analyses the fragility of a rock mesh: contact, mass properties, rocking angles and their
+/// uncertainty. See the [module documentation](self) for frames, units and steps.
+///
+/// # Errors
+/// - [`FragilityError::InvalidConfig`] for an out-of-range setting (including a zero `up`).
+/// - [`FragilityError::InvalidMesh`], [`FragilityError::EmptyMesh`],
+///   [`FragilityError::OpenMesh`], [`FragilityError::NonManifold`],
+///   [`FragilityError::InconsistentWinding`] or [`FragilityError::Degenerate`] for a rock or
+///   pedestal mesh that is not a closed, consistently wound solid.
+/// - [`FragilityError::ContactOutsideRock`] for a contact height at or above the rock's top.
+/// - [`FragilityError::NoPedestalContact`] when the pedestal is not under the rock.
+/// - [`FragilityError::ComOutsideContact`] when the centre of mass is not over the contact.
+pub fn analyze(
+    mesh: &TriangleMesh,
+    contact: ContactSpec<'_>,
+    config: &FragilityConfig,
+) -> Result<FragilityReport, FragilityError> {
+    analyze_detailed(mesh, contact, config).map(|a| a.report)
+}
+
+/// As [`analyze`], also returning the levelled geometry (for [`figure::write_figure`] and
+/// [`FragilityAnalysis::closed_rock`]).
+///
+/// # Errors
+/// As [`analyze`].
+pub fn analyze_detailed(
+    mesh: &TriangleMesh,
+    contact: ContactSpec<'_>,
+    config: &FragilityConfig,
+) -> Result<FragilityAnalysis, FragilityError> {
+    config.validate()?;
+    let levelled_from_input = config.levelled_from_input();
+    let input_from_levelled = levelled_from_input.inverse();
+    let (solid, repairs) = prepare(mesh, "rock", &levelled_from_input)?;
+    let band = config.contact_band_m;
+
+    let pedestal = match contact {
+        ContactSpec::Pedestal(p) => Some(prepare(p, "pedestal", &levelled_from_input)?.0),
+        _ => None,
+    };
+    let (h, method, pedestal_hull) = match contact {
+        ContactSpec::Auto => {
+            let neck = contact::find_neck(
+                &solid,
+                config.profile_levels,
+                config.neck_min_area_ratio,
+                config.neck_plateau_tolerance,
+            );
+            tracing::debug!(?neck, "neck search");
+            let method = if neck.found {
+                ContactMethod::Neck
+            } else {
+                ContactMethod::Base
+            };
+            (neck.height_m, method, None)
+        }
+        ContactSpec::Height(h) => {
+            let (lo, hi) = solid
+                .z_range()
+                .ok_or(FragilityError::EmptyMesh { mesh: "rock" })?;
+            if !(h.is_finite() && h < hi) {
+                return Err(FragilityError::ContactOutsideRock {
+                    contact_height_m: h,
+                    z_min_m: lo,
+                    z_max_m: hi,
+                });
+            }
+            (h, ContactMethod::Height, None)
+        }
+        ContactSpec::Pedestal(_) => {
+            // Invariant: `pedestal` is `Some` exactly for `ContactSpec::Pedestal`.
+            let ped = pedestal
+                .as_ref()
+                .ok_or(FragilityError::EmptyMesh { mesh: "pedestal" })?;
+            let top = contact::pedestal_top(&solid, ped)?;
+            let (rock_lo, _) = solid
+                .z_range()
+                .ok_or(FragilityError::EmptyMesh { mesh: "rock" })?;
+            let gap = rock_lo - top;
+            if gap > config.pedestal_gap_tolerance_m {
+                return Err(FragilityError::NoPedestalContact(format!(
+                    "the rock's lowest point is {gap:.4} m above the pedestal's top (tolerance {} m)",
+                    config.pedestal_gap_tolerance_m
+                )));
+            }
+            let hull = rocking::convex_hull(&contact::points_below(ped, top, band, true));
+            if hull.is_empty() {
+                return Err(FragilityError::NoPedestalContact(
+                    "the pedestal has no top surface under the rock".into(),
+                ));
+            }
+            (top.max(rock_lo), ContactMethod::Pedestal, Some(hull))
+        }
+    };
+
+    let support = match &pedestal_hull {
+        Some(hull) => Support::Fixed(hull),
+        None => Support::Below(&solid),
+    };
+    let eval = evaluate(&solid, h, &support, band, config)?;
+    let h = eval.contact_height;
+    if eval.min.distance_m < 0.0 {
+        return Err(FragilityError::ComOutsideContact {
+            distance_m: -eval.min.distance_m,
+            azimuth_deg: eval.min.azimuth_deg,
+        });
+    }
+
+    // Rocking angles.
+    let com = eval.mass.center_of_mass;
+    let com_xy = com.xy();
+    let alpha_deg =
+        rocking::rocking_angles_deg(&eval.hull, &com_xy, eval.com_height, config.azimuth_count);
+    let half = config.azimuth_count / 2;
+    let opposite_pairs = (0..half)
+        .map(|i| OppositePair {
+            azimuth_deg: i as f64 * 360.0 / config.azimuth_count as f64,
+            alpha_deg: alpha_deg[i],
+            opposite_alpha_deg: alpha_deg[i + half],
+        })
+        .collect();
+    let theta = eval.min.azimuth_deg.to_radians();
+    let u = rocking::direction(theta);
+    let opposite = rocking::support_distance(&eval.hull, &com_xy, &(-u)).unwrap_or(0.0);
+    let alpha_min_pair = OppositePair {
+        azimuth_deg: eval.min.azimuth_deg,
+        alpha_deg: eval.alpha_min_rad.to_degrees(),
+        opposite_alpha_deg: opposite.atan2(eval.com_height).to_degrees(),
+    };
+
+    // Purvance's p about the α_min rocking axis.
+    let pivot = Point3::new(
+        com.x + eval.min.distance_m * u.x,
+        com.y + eval.min.distance_m * u.y,
+        h,
+    );
+    let axis = Unit::new_normalize(Vector3::new(-u.y, u.x, 0.0));
+    let inertia_o = eval.mass.inertia_about_axis(&pivot, &axis);
+    let radius = eval.min.distance_m.hypot(eval.com_height);
+    let p = rocking::purvance_p(eval.mass.mass_kg, config.g_m_s2, radius, inertia_o);
+
+    let (_, top) = eval.cut.solid.z_range().unwrap_or((h, h));
+    let width = eval.min.distance_m + opposite;
+
+    // Uncertainty.
+    let sample_support = match &pedestal_hull {
+        Some(hull) => SampleSupport::Fixed(hull),
+        None => SampleSupport::SelfBelow,
+    };
+    let uncertainty = alpha_min_spread(&solid, h, sample_support, config);
+
+    let to_input = |p: Point3<f64>| -> [f64; 3] { (input_from_levelled * p).coords.into() };
+    let r = input_from_levelled.matrix();
+    let inertia: Matrix3<f64> = r * eval.mass.inertia_kg_m2 * r.transpose();
+    let tan = eval.alpha_min_rad.tan();
+    let report = FragilityReport {
+        alpha_min_deg: eval.alpha_min_rad.to_degrees(),
+        alpha_min_azimuth_deg: eval.min.azimuth_deg,
+        toppling_pga_g: tan,
+        toppling_pga_m_s2: config.g_m_s2 * tan,
+        volume_m3: eval.mass.volume_m3,
+        mass_kg: eval.mass.mass_kg,
+        density_kg_m3: config.density_kg_m3,
+        center_of_mass: to_input(com),
+        com_height_above_contact_m: eval.com_height,
+        contact_height_m: h,
+        contact_method: method,
+        contact_area_m2: rocking::polygon_area(&eval.hull),
+        section_area_m2: eval.cut.section.area().max(0.0),
+        contact_polygon: eval
+            .hull
+            .iter()
+            .map(|q| to_input(Point3::new(q.x, q.y, h)))
+            .collect(),
+        rock_height_m: top - h,
+        contact_width_m: width,
+        height_to_width: if width > 0.0 {
+            (top - h) / width
+        } else {
+            f64::INFINITY
+        },
+        alpha_deg,
+        opposite_pairs,
+        alpha_min_pair,
+        inertia_kg_m2: inertia.transpose().into(),
+        rocking_radius_m: radius,
+        inertia_about_rocking_axis_kg_m2: inertia_o,
+        purvance_p_rad_s: p,
+        alpha_min_spread_deg: uncertainty.alpha_min_std_deg,
+        uncertainty,
+        up: Vector3::from(config.up).normalize().into(),
+        repairs,
+    };
+    let support_solid = match pedestal {
+        Some(p) => Some(p),
+        None => solid
+            .z_range()
+            .filter(|(lo, _)| *lo < h)
+            .map(|_| solid.clone()),
+    };
+    Ok(FragilityAnalysis {
+        report,
+        rock: eval.cut.solid,
+        support: support_solid,
+        contact_hull: eval.hull,
+        com,
+        contact_height: h,
+        alpha_min_azimuth: theta,
+        input_from_levelled,
+    })
+}
+
+/// A closed solid: the part of a mesh above a height, with its cut closed.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ClosedCut {
+    /// The closed (watertight) mesh, input frame, metres; the cap's faces point down.
+    pub mesh: TriangleMesh,
+    /// Area of the section that closes it, m² (holes subtracted).
+    pub section_area_m2: f64,
+    /// Number of section loops (outer boundaries and holes).
+    pub section_loops: usize,
+}
+
+/// Cuts a closed mesh at `height_m` along `up` (any non-zero vector, input frame) and closes
+/// the part above by triangulating the section polygons. Used to flatten a rock's base or to
+/// separate it from its pedestal for export.
+///
+/// # Errors
+/// The mesh checks of [`analyze`], [`FragilityError::InvalidConfig`] for a zero `up`, and
+/// [`FragilityError::ContactOutsideRock`] when the plane does not leave anything above it.
+pub fn cut_and_close(
+    mesh: &TriangleMesh,
+    up: [f64; 3],
+    height_m: f64,
+) -> Result<ClosedCut, FragilityError> {
+    let config = FragilityConfig {
+        up,
+        ..FragilityConfig::default()
+    };
+    config.validate()?;
+    let levelled_from_input = config.levelled_from_input();
+    let (solid, _) = prepare(mesh, "rock", &levelled_from_input)?;
+    let (lo, hi) = solid
+        .z_range()
+        .ok_or(FragilityError::EmptyMesh { mesh: "rock" })?;
+    if !(height_m.is_finite() && height_m < hi) {
+        return Err(FragilityError::ContactOutsideRock {
+            contact_height_m: height_m,
+            z_min_m: lo,
+            z_max_m: hi,
+        });
+    }
+    let cut = cut_above(&solid, height_m.max(lo))?;
+    Ok(ClosedCut {
+        mesh: cut.solid.to_mesh(&levelled_from_input.inverse()),
+        section_area_m2: cut.section.area(),
+        section_loops: cut.section.loops.len(),
+    })
+}
+
+/// The levelled-frame horizontal direction of an azimuth in radians.
+pub(crate) fn azimuth_direction(azimuth_rad: f64) -> Vector2<f64> {
+    rocking::direction(azimuth_rad)
+}
