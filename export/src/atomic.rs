@@ -95,7 +95,8 @@ where
         _ => Path::new("."),
     };
 
-    let (file, guard) = create_temp(dir, file_name).map_err(fail("cannot create a temporary file"))?;
+    let (file, guard) =
+        create_temp(dir, file_name).map_err(fail("cannot create a temporary file"))?;
     let mut writer = BufWriter::new(file);
     let value = write(&mut writer).map_err(fail("write failed"))?;
     let file = writer
@@ -215,7 +216,10 @@ mod tests {
         })
         .unwrap_err();
         let msg = err.to_string();
-        assert!(msg.contains("a.txt") && msg.contains("encoder gave up"), "{msg}");
+        assert!(
+            msg.contains("a.txt") && msg.contains("encoder gave up"),
+            "{msg}"
+        );
         assert_eq!(fs::read(&path).unwrap(), b"old");
         assert!(temp_files(dir.path()).is_empty());
     }
@@ -259,6 +263,9 @@ mod tests {
         write_bytes_atomically(&path, b"1").unwrap();
         fs::set_permissions(&path, fs::Permissions::from_mode(0o640)).unwrap();
         write_bytes_atomically(&path, b"2").unwrap();
-        assert_eq!(fs::metadata(&path).unwrap().permissions().mode() & 0o777, 0o640);
+        assert_eq!(
+            fs::metadata(&path).unwrap().permissions().mode() & 0o777,
+            0o640
+        );
     }
 }

@@ -112,7 +112,10 @@ pub enum PlyError {
         message: String,
     },
     /// The data ends before all elements the header declares.
-    #[error("{file}: truncated: expected {expected} {}, read {read}{note}", plural(element))]
+    #[error(
+        "{file}: truncated: expected {expected} {}, read {read}{note}",
+        plural(element)
+    )]
     Truncated {
         /// The file or source name.
         file: String,
@@ -140,7 +143,9 @@ pub enum PlyError {
         message: String,
     },
     /// A face refers to a vertex that does not exist (or to a negative index).
-    #[error("{file}: face {face} refers to vertex {index} but the file has {vertex_count} vertices")]
+    #[error(
+        "{file}: face {face} refers to vertex {index} but the file has {vertex_count} vertices"
+    )]
     FaceIndexOutOfRange {
         /// The file or source name.
         file: String,
@@ -162,7 +167,7 @@ pub enum PlyError {
         corners: usize,
     },
     /// A position or normal is NaN or infinite.
-    #[error("{file}: vertex {vertex} has a non-finite {attribute} ({value})")]
+    #[error("{file}: vertex {vertex} has a non-finite {attribute} ({value:e})")]
     NotFinite {
         /// The file or source name.
         file: String,
@@ -268,7 +273,14 @@ pub fn write_mesh(
     let name = path.display().to_string();
     write::check_mesh(mesh, &name)?;
     write_atomically(path, |w| {
-        write::write_ply(w, &mesh.positions, &mesh.normals, &mesh.colors, Some(&mesh.faces), encoding)
+        write::write_ply(
+            w,
+            &mesh.positions,
+            &mesh.normals,
+            &mesh.colors,
+            Some(&mesh.faces),
+            encoding,
+        )
     })?;
     Ok(())
 }
@@ -285,11 +297,18 @@ pub fn write_mesh_to_writer<W: Write>(
 ) -> Result<(), PlyError> {
     let name = "<writer>";
     write::check_mesh(mesh, name)?;
-    write::write_ply(writer, &mesh.positions, &mesh.normals, &mesh.colors, Some(&mesh.faces), encoding)
-        .map_err(|source| PlyError::Io {
-            file: name.to_owned(),
-            source,
-        })
+    write::write_ply(
+        writer,
+        &mesh.positions,
+        &mesh.normals,
+        &mesh.colors,
+        Some(&mesh.faces),
+        encoding,
+    )
+    .map_err(|source| PlyError::Io {
+        file: name.to_owned(),
+        source,
+    })
 }
 
 /// Writes a point cloud (a PLY file with only a `vertex` element) to `path` atomically.
@@ -306,7 +325,14 @@ pub fn write_point_cloud(
     let name = path.display().to_string();
     write::check_cloud(cloud, &name)?;
     write_atomically(path, |w| {
-        write::write_ply(w, &cloud.positions, &cloud.normals, &cloud.colors, None, encoding)
+        write::write_ply(
+            w,
+            &cloud.positions,
+            &cloud.normals,
+            &cloud.colors,
+            None,
+            encoding,
+        )
     })?;
     Ok(())
 }
@@ -322,11 +348,18 @@ pub fn write_point_cloud_to_writer<W: Write>(
 ) -> Result<(), PlyError> {
     let name = "<writer>";
     write::check_cloud(cloud, name)?;
-    write::write_ply(writer, &cloud.positions, &cloud.normals, &cloud.colors, None, encoding)
-        .map_err(|source| PlyError::Io {
-            file: name.to_owned(),
-            source,
-        })
+    write::write_ply(
+        writer,
+        &cloud.positions,
+        &cloud.normals,
+        &cloud.colors,
+        None,
+        encoding,
+    )
+    .map_err(|source| PlyError::Io {
+        file: name.to_owned(),
+        source,
+    })
 }
 
 fn open(path: &Path) -> Result<File, PlyError> {
