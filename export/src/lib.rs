@@ -44,4 +44,6 @@
 #![warn(missing_docs)]
 
 pub mod atomic;
+pub mod geojson;
+pub mod glb;
 pub mod ply;
