@@ -906,7 +906,11 @@ impl Reader<'_> {
         };
         let indices: Vec<u32> = match primitive.indices() {
             Some(acc) => self.read_indices(&acc, &what("indices"))?,
-            None => (0..n as u32).collect(),
+            None => {
+                let n = u32::try_from(n)
+                    .map_err(|_| self.unsupported(format!("{} vertices without indices", n)))?;
+                (0..n).collect()
+            }
         };
         if !indices.len().is_multiple_of(3) {
             return Err(self.corrupt(format!(
@@ -1018,8 +1022,11 @@ impl Reader<'_> {
                 acc.dimensions()
             )));
         }
+        // `elements` checks the count against the data first, so the capacity is bounded by
+        // the file size; every element slice is exactly 12 bytes (float VEC3).
+        let elements = self.elements(acc, what, true)?;
         let mut out = Vec::with_capacity(acc.count());
-        for (i, e) in self.elements(acc, what, true)?.enumerate() {
+        for (i, e) in elements.enumerate() {
             let v = [0, 4, 8].map(|k| f32::from_le_bytes([e[k], e[k + 1], e[k + 2], e[k + 3]]));
             if require_finite && !v.iter().all(|c| c.is_finite()) {
                 return Err(self.corrupt(format!("{what} element {i} is not finite: {v:?}")));
@@ -1037,6 +1044,7 @@ impl Reader<'_> {
                 return Err(self.unsupported(format!("{what} is {other:?}; expected VEC3 or VEC4")));
             }
         }
+        // Element slices hold 3 or 4 components of the matched type, and k < 3.
         let decode: fn(&[u8], usize) -> f32 = match (acc.data_type(), acc.normalized()) {
             (DataType::F32, _) => {
                 |e, k| f32::from_le_bytes([e[4 * k], e[4 * k + 1], e[4 * k + 2], e[4 * k + 3]])
@@ -1062,6 +1070,7 @@ impl Reader<'_> {
         if acc.dimensions() != Dimensions::Scalar {
             return Err(self.corrupt(format!("{what} is {:?}, not SCALAR", acc.dimensions())));
         }
+        // Element slices are exactly one component of the matched type.
         let decode: fn(&[u8]) -> u32 = match acc.data_type() {
             DataType::U8 => |e| u32::from(e[0]),
             DataType::U16 => |e| u32::from(u16::from_le_bytes([e[0], e[1]])),

@@ -330,6 +330,27 @@ fn corrupt_files_are_rejected_with_reasons() {
             "do not fit buffer view",
         ),
         (
+            // A huge count must be checked before anything is allocated for it.
+            rebuild(
+                &good,
+                |j| j["accessors"][1]["count"] = json!(1_000_000_000_000_000u64),
+                |_| {},
+            ),
+            "NORMAL has 1000000000000000 items",
+        ),
+        (
+            rebuild(
+                &good,
+                |j| {
+                    for a in 0..4 {
+                        j["accessors"][a]["count"] = json!(1_000_000_000_000_002u64);
+                    }
+                },
+                |_| {},
+            ),
+            "do not fit buffer view",
+        ),
+        (
             rebuild(
                 &good,
                 |j| j["accessors"][0]["byteOffset"] = json!(2),

@@ -8,7 +8,10 @@ use scarp_export::glb::read_glb_from_slice;
 fuzz_target!(|data: &[u8]| {
     if let Ok(contents) = read_glb_from_slice(data, "fuzz.glb") {
         for node in &contents.nodes {
-            assert!(node.mesh.validate().is_ok(), "the reader returned an invalid mesh");
+            assert!(
+                node.mesh.validate().is_ok(),
+                "the reader returned an invalid mesh"
+            );
         }
     }
 });
