@@ -8,6 +8,20 @@
 //!
 //! Heights are ellipsoidal (above the WGS84 ellipsoid), as RFC 7946 requires for the third
 //! coordinate; an origin altitude given above mean sea level must be converted first.
+//!
+//! ```
+//! use nalgebra::Point3;
+//! use scarp_export::geojson::{EnuFrame, Geodetic, PointFeature, feature_collection};
+//!
+//! let frame = EnuFrame::new(Geodetic { lat_deg: 33.6, lon_deg: -116.45, alt_m: 1200.0 }).unwrap();
+//! let rock = PointFeature {
+//!     position_enu_m: Point3::new(120.0, -35.0, 4.0), // 120 m east, 35 m south, 4 m up
+//!     properties: serde_json::json!({"rock_id": 7}),
+//! };
+//! let fc = feature_collection(&frame, &[rock]).unwrap();
+//! let lon = fc["features"][0]["geometry"]["coordinates"][0].as_f64().unwrap();
+//! assert!(lon > -116.45 && lon < -116.44);
+//! ```
 
 use std::path::Path;
 

@@ -30,6 +30,23 @@
 //! and the index range, before it returns meshes in ENU. Node transforms (the whole scene
 //! hierarchy) are applied. Truncated or corrupt files are errors that name the file; no input
 //! makes it panic.
+//!
+//! ```
+//! use nalgebra::Point3;
+//! use scarp_export::glb::{GlbNode, GlbOptions, glb_to_vec, read_glb_from_slice};
+//! use scarp_slam::TriangleMesh;
+//!
+//! let rock = TriangleMesh::new(
+//!     vec![Point3::new(0.0, 0.0, 0.0), Point3::new(1.0, 0.0, 0.0), Point3::new(0.0, 0.0, 2.0)],
+//!     vec![[0, 1, 2]],
+//! )
+//! .unwrap();
+//! let node = GlbNode::new("rock-7", &rock).with_extras(serde_json::json!({"rock_id": 7}));
+//! let bytes = glb_to_vec(&[node], &GlbOptions::default()).unwrap();
+//! let back = read_glb_from_slice(&bytes, "rock.glb").unwrap();
+//! assert_eq!(back.nodes[0].mesh.positions, rock.positions); // ENU again, exactly
+//! assert_eq!(back.nodes[0].extras.as_ref().unwrap()["rock_id"], 7);
+//! ```
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
