@@ -1,8 +1,8 @@
 //! # scarp-export
 //!
-//! File formats of scarp: PLY meshes and point clouds ([`ply`]), OBJ meshes ([`obj`], read),
-//! TUM trajectories ([`tum`]) and the crash-safe write helper every output goes through
-//! ([`atomic`]).
+//! File formats of scarp: PLY meshes and point clouds ([`ply`]), glTF binary scenes ([`glb`]),
+//! GeoJSON target maps ([`geojson`]), OBJ meshes ([`obj`], read), TUM trajectories ([`tum`]),
+//! and the crash-safe write helper every output goes through ([`atomic`]).
 //!
 //! Conventions:
 //! - Meshes and clouds are [`scarp_slam::TriangleMesh`] and [`scarp_slam::PointCloud`], in world
@@ -44,6 +44,8 @@
 #![warn(missing_docs)]
 
 pub mod atomic;
+pub mod geojson;
+pub mod glb;
 pub mod obj;
 pub mod ply;
 pub mod tum;

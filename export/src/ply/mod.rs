@@ -167,7 +167,7 @@ pub enum PlyError {
         corners: usize,
     },
     /// A position or normal is NaN or infinite.
-    #[error("{file}: vertex {vertex} has a non-finite {attribute} ({value})")]
+    #[error("{file}: vertex {vertex} has a non-finite {attribute} ({value:e})")]
     NotFinite {
         /// The file or source name.
         file: String,
