@@ -43,3 +43,20 @@ fn default_world_has_precarious_targets_and_distractors() {
         assert!(target.volume_m3 > 0.1);
     }
 }
+
+#[test]
+fn readme_world_example_builds() {
+    let readme = include_str!("../README.md");
+    let start = readme.find("```toml\n").expect("README has a TOML example") + "```toml\n".len();
+    let end = start + readme[start..].find("```").expect("closed block");
+    let world = World::from_toml_str(
+        &readme[start..end],
+        std::path::Path::new("README.md"),
+        std::path::Path::new("."),
+    )
+    .unwrap();
+    assert_eq!(world.config.name, "granite-pass");
+    assert_eq!(world.rocks.len(), 2);
+    assert!((world.rock(1).unwrap().height_m - 1.5).abs() < 0.01);
+    assert_eq!(world.rock(10).unwrap().role, RockRole::Distractor);
+}
