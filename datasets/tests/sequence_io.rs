@@ -211,3 +211,58 @@ fn bad_input_gives_errors_that_name_the_culprit() {
         &["rocks[0].position_m"],
     );
 }
+
+#[test]
+fn real_tum_style_sequences_load() {
+    let dir = TempDir::new("tumstyle");
+    let world = small_world();
+    let poses = paths::default_orbit(&world, 3).unwrap();
+    write_sequence(&dir.0, &world, &poses, &settings(false), &|| {}).unwrap();
+    // A real sequence has no estimate, boxes or masks, depth stamped apart from colour, a
+    // denser ground truth, and sometimes a negative fy.
+    for extra in ["estimate.txt", "boxes.txt"] {
+        std::fs::remove_file(dir.0.join(extra)).unwrap();
+    }
+    std::fs::remove_dir_all(dir.0.join("mask")).unwrap();
+    let camera = std::fs::read_to_string(dir.0.join("camera.toml")).unwrap();
+    let fy_line = camera
+        .lines()
+        .find(|l| l.starts_with("fy"))
+        .unwrap()
+        .to_string();
+    std::fs::write(
+        dir.0.join("camera.toml"),
+        camera.replace(&fy_line, &fy_line.replace("= ", "= -")),
+    )
+    .unwrap();
+    std::fs::write(
+        dir.0.join("depth.txt"),
+        "0.012 depth/0.000000.png\n0.065 depth/0.050000.png\n0.1001 depth/0.100000.png\n",
+    )
+    .unwrap();
+    let seq = Sequence::open(&dir.0).unwrap();
+    assert!(seq.camera.fy < 0.0);
+    // 0.065 is 0.015 s from 0.05 (kept); the first pair is 0.012 s apart (kept).
+    assert_eq!(seq.len(), 3);
+    assert!(
+        seq.entries
+            .iter()
+            .all(|e| e.mask_path.is_none() && e.world_from_camera_estimate.is_none())
+    );
+    assert!(seq.boxes.is_empty());
+    assert!(seq.load_frame(1).unwrap().instance_mask.is_none());
+    // Depth more than 0.02 s away is not associated.
+    std::fs::write(
+        dir.0.join("depth.txt"),
+        "0.028 depth/0.000000.png\n0.076 depth/0.050000.png\n0.1001 depth/0.100000.png\n",
+    )
+    .unwrap();
+    let seq = Sequence::open(&dir.0).unwrap();
+    assert_eq!(
+        seq.entries
+            .iter()
+            .map(|e| e.timestamp_s)
+            .collect::<Vec<_>>(),
+        vec![0.1]
+    );
+}

@@ -167,6 +167,23 @@ impl<'w> Renderer<'w> {
         Ok(self.resolve(camera, world_from_camera, &triangles, &winners, &inv_depth))
     }
 
+    /// Ambient plus Lambert light at the corners of a face, from its vertex normals (or its face
+    /// normal when the mesh has none).
+    fn corner_light(&self, layer: &Layer, face: &[u32; 3]) -> [f32; 3] {
+        let sun = self.world.sun_direction;
+        let ambient = self.world.config.sun.ambient as f32;
+        let light = |n: Vector3<f64>| {
+            let lambert = (n.dot(&sun) / n.norm().max(1e-12)).max(0.0) as f32;
+            ambient + (1.0 - ambient) * lambert
+        };
+        if layer.mesh.normals.is_empty() {
+            let p = face.map(|v| layer.mesh.positions[v as usize].cast::<f64>());
+            [light((p[1] - p[0]).cross(&(p[2] - p[0]))); 3]
+        } else {
+            face.map(|v| light(layer.mesh.normals[v as usize].cast::<f64>()))
+        }
+    }
+
     fn chunk_visible(
         camera: &PinholeCamera,
         camera_from_world: &Isometry3<f64>,
@@ -223,18 +240,18 @@ impl<'w> Renderer<'w> {
                 let layer = &self.layers[l];
                 let Chunk { start, end, .. } = layer.chunks[c];
                 let mut out = Vec::new();
-                for (f, face) in layer.faces[start..end].iter().enumerate() {
+                for face in &layer.faces[start..end] {
                     let corners = face.map(|v| {
                         camera_from_world * layer.mesh.positions[v as usize].cast::<f64>()
                     });
-                    setup_triangle(
-                        camera,
-                        &corners,
-                        l as u16,
-                        (start + f) as u32,
-                        NEAR_PLANE_M,
-                        &mut out,
-                    );
+                    let first_new = out.len();
+                    setup_triangle(camera, &corners, l as u16, NEAR_PLANE_M, &mut out);
+                    if out.len() > first_new {
+                        let corner_light = self.corner_light(layer, face);
+                        for t in &mut out[first_new..] {
+                            t.corner_light = corner_light;
+                        }
+                    }
                 }
                 out
             })
@@ -297,8 +314,6 @@ impl<'w> Renderer<'w> {
         let (w, h) = (camera.width, camera.height);
         let width = w as usize;
         let world = self.world;
-        let sun = world.sun_direction;
-        let ambient = world.config.sun.ambient as f32;
         let texture = &world.config.texture;
         let mut rgb = RgbImage::filled(w, h, [0, 0, 0]);
         let mut depth = DepthImage::filled(w, h, 0.0);
@@ -338,17 +353,12 @@ impl<'w> Renderer<'w> {
                     };
                     let p = Point3::from(ray * z);
                     let p_world = world_from_camera * p;
-                    let shading_normal: Vector3<f64> = if layer.mesh.normals.is_empty() {
-                        world_from_camera.rotation * normal.normalize()
-                    } else {
-                        // Barycentrics of p in the triangle (sub-areas against the face normal).
-                        let area2 = normal.norm_squared().max(1e-30);
-                        let w_a = (b - p).cross(&(c - p)).dot(normal) / area2;
-                        let w_b = (c - p).cross(&(a - p)).dot(normal) / area2;
-                        let face = layer.faces[t.face as usize];
-                        let n = face.map(|k| layer.mesh.normals[k as usize].cast::<f64>());
-                        n[0] * w_a + n[1] * w_b + n[2] * (1.0 - w_a - w_b)
-                    };
+                    // Barycentrics of p in the triangle (sub-areas against the face normal).
+                    let area2 = normal.norm_squared().max(1e-30);
+                    let w_a = ((b - p).cross(&(c - p)).dot(normal) / area2) as f32;
+                    let w_b = ((c - p).cross(&(a - p)).dot(normal) / area2) as f32;
+                    let [l_a, l_b, l_c] = t.corner_light;
+                    let light = l_a * w_a + l_b * w_b + l_c * (1.0 - w_a - w_b);
                     let albedo = match layer.material {
                         Material::Terrain => world.terrain_albedo.sample(p_world.x, p_world.y),
                         Material::Solid(base) => {
@@ -356,9 +366,6 @@ impl<'w> Renderer<'w> {
                                 .map(f32::from)
                         }
                     };
-                    let lambert = (shading_normal.dot(&sun) / shading_normal.norm().max(1e-12))
-                        .max(0.0) as f32;
-                    let light = ambient + (1.0 - ambient) * lambert;
                     rgb_row[u] = albedo.map(|a| (a * light + 0.5).clamp(0.0, 255.0) as u8);
                     depth_row[u] = z as f32;
                     instance_row[u] = layer.instance_id;

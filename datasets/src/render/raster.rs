@@ -17,12 +17,13 @@ pub struct SetupTriangle {
     pub bbox: [u32; 4],
     /// Index of the source layer.
     pub layer: u16,
-    /// Index of the source face in the layer's reordered face list.
-    pub face: u32,
     /// The unclipped face's corners in camera coordinates, metres.
     pub corners: [Point3<f64>; 3],
     /// The face's unnormalised normal (b − a) × (c − a), camera frame.
     pub normal: Vector3<f64>,
+    /// Light (ambient + diffuse, in [0, 1]) at each corner, interpolated across the face
+    /// (Gouraud shading); set by the caller after setup.
+    pub corner_light: [f32; 3],
 }
 
 /// Sets up one camera-space triangle: culls back faces (faces wound clockwise seen from the
@@ -31,7 +32,6 @@ pub fn setup_triangle(
     camera: &PinholeCamera,
     corners: &[Point3<f64>; 3],
     layer: u16,
-    face: u32,
     near_m: f64,
     out: &mut Vec<SetupTriangle>,
 ) {
@@ -89,9 +89,9 @@ pub fn setup_triangle(
             inv_z,
             bbox: [u0 as u32, v0 as u32, u1 as u32, v1 as u32],
             layer,
-            face,
             corners: *corners,
             normal,
+            corner_light: [1.0; 3],
         });
     }
 }
