@@ -1,8 +1,6 @@
 //! Rock geometry: procedural boulders, pedestals, and seating a rock on its pedestal through a
 //! narrow, flat basal contact.
 
-use std::collections::HashMap;
-
 use nalgebra::{Point2, Point3, Vector3};
 use scarp_slam::TriangleMesh;
 use scarp_slam::geometry::{convex_hull_2d, polygon_signed_area};
@@ -75,74 +73,6 @@ pub struct Contact {
     pub area_m2: f64,
 }
 
-/// A unit icosphere subdivided `level` times, wound outwards.
-pub fn icosphere(level: u32) -> TriangleMesh {
-    let t = (1.0 + 5f32.sqrt()) / 2.0;
-    let mut positions: Vec<Point3<f32>> = [
-        (-1.0, t, 0.0),
-        (1.0, t, 0.0),
-        (-1.0, -t, 0.0),
-        (1.0, -t, 0.0),
-        (0.0, -1.0, t),
-        (0.0, 1.0, t),
-        (0.0, -1.0, -t),
-        (0.0, 1.0, -t),
-        (t, 0.0, -1.0),
-        (t, 0.0, 1.0),
-        (-t, 0.0, -1.0),
-        (-t, 0.0, 1.0),
-    ]
-    .iter()
-    .map(|&(x, y, z)| Point3::from(Vector3::new(x, y, z).normalize()))
-    .collect();
-    let mut faces: Vec<[u32; 3]> = vec![
-        [0, 11, 5],
-        [0, 5, 1],
-        [0, 1, 7],
-        [0, 7, 10],
-        [0, 10, 11],
-        [1, 5, 9],
-        [5, 11, 4],
-        [11, 10, 2],
-        [10, 7, 6],
-        [7, 1, 8],
-        [3, 9, 4],
-        [3, 4, 2],
-        [3, 2, 6],
-        [3, 6, 8],
-        [3, 8, 9],
-        [4, 9, 5],
-        [2, 4, 11],
-        [6, 2, 10],
-        [8, 6, 7],
-        [9, 8, 1],
-    ];
-    for _ in 0..level {
-        let mut midpoints: HashMap<(u32, u32), u32> = HashMap::new();
-        let mut midpoint = |a: u32, b: u32, positions: &mut Vec<Point3<f32>>| {
-            *midpoints.entry((a.min(b), a.max(b))).or_insert_with(|| {
-                let m = (positions[a as usize].coords + positions[b as usize].coords).normalize();
-                positions.push(Point3::from(m));
-                (positions.len() - 1) as u32
-            })
-        };
-        faces = faces
-            .iter()
-            .flat_map(|&[a, b, c]| {
-                let ab = midpoint(a, b, &mut positions);
-                let bc = midpoint(b, c, &mut positions);
-                let ca = midpoint(c, a, &mut positions);
-                [[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]
-            })
-            .collect();
-    }
-    TriangleMesh {
-        positions,
-        faces,
-        ..TriangleMesh::default()
-    }
-}
-
 impl BoulderShape {
     /// The boulder mesh, centred on its ellipsoid's centre, in metres.
     ///
@@ -168,7 +98,7 @@ impl BoulderShape {
                 "must lie in 1..=6",
             ));
         }
-        let mut mesh = icosphere(self.subdivisions);
+        let mut mesh = TriangleMesh::icosphere(self.subdivisions);
         let radii = Vector3::from(self.radii_m);
         for p in &mut mesh.positions {
             let d = p.coords.cast::<f64>();
@@ -356,15 +286,6 @@ pub fn seat_on_flat_contact(
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn icosphere_is_closed_and_outward() {
-        let m = icosphere(3);
-        assert_eq!(m.face_count(), 20 * 64);
-        let v = m.volume_properties().unwrap();
-        assert!((v.volume_m3 - 4.0 / 3.0 * std::f64::consts::PI).abs() < 0.05);
-        assert!(v.centroid.coords.norm() < 1e-6);
-    }
 
     #[test]
     fn boulder_keeps_positive_volume() {

@@ -89,11 +89,14 @@ fn plane_renders_exact_depth_and_ids() {
 fn cube_corners_land_on_their_analytic_pixels() {
     let dir = std::env::temp_dir().join(format!("scarp-cube-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
+    let cube = scarp_slam::TriangleMesh::cuboid(Point3::origin(), Point3::new(1.0, 1.0, 1.0));
     let mut obj = String::new();
-    for i in 0..8 {
-        obj.push_str(&format!("v {} {} {}\n", i & 1, (i >> 1) & 1, (i >> 2) & 1));
+    for p in &cube.positions {
+        obj.push_str(&format!("v {} {} {}\n", p.x, p.y, p.z));
     }
-    obj.push_str("f 1 3 2\nf 2 3 4\nf 5 6 7\nf 6 8 7\nf 1 2 5\nf 2 6 5\nf 3 7 4\nf 4 7 8\nf 1 5 3\nf 3 5 7\nf 2 4 6\nf 4 8 6\n");
+    for f in &cube.faces {
+        obj.push_str(&format!("f {} {} {}\n", f[0] + 1, f[1] + 1, f[2] + 1));
+    }
     std::fs::write(dir.join("cube.obj"), obj).unwrap();
     let world = flat_world(
         r#"

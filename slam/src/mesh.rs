@@ -1,5 +1,7 @@
 //! Indexed triangle meshes.
 
+use std::collections::HashMap;
+
 use nalgebra::{Isometry3, Point3, Vector3};
 
 use crate::SlamError;
@@ -86,6 +88,108 @@ impl TriangleMesh {
         };
         mesh.validate()?;
         Ok(mesh)
+    }
+
+    /// The closed box between two corners (metres), wound outwards: 8 vertices, 12 triangles.
+    pub fn cuboid(min: Point3<f32>, max: Point3<f32>) -> Self {
+        let positions = (0..8)
+            .map(|i| {
+                Point3::new(
+                    if i & 1 == 0 { min.x } else { max.x },
+                    if i & 2 == 0 { min.y } else { max.y },
+                    if i & 4 == 0 { min.z } else { max.z },
+                )
+            })
+            .collect();
+        let faces = vec![
+            [0, 2, 1],
+            [1, 2, 3], // −z
+            [4, 5, 6],
+            [5, 7, 6], // +z
+            [0, 1, 4],
+            [1, 5, 4], // −y
+            [2, 6, 3],
+            [3, 6, 7], // +y
+            [0, 4, 2],
+            [2, 4, 6], // −x
+            [1, 3, 5],
+            [3, 7, 5], // +x
+        ];
+        Self {
+            positions,
+            faces,
+            ..Self::default()
+        }
+    }
+
+    /// A unit-radius icosphere about the origin, wound outwards: the icosahedron subdivided
+    /// `level` times (20·4^level triangles), new vertices pushed onto the sphere.
+    pub fn icosphere(level: u32) -> Self {
+        let t = (1.0 + 5f32.sqrt()) / 2.0;
+        let mut positions: Vec<Point3<f32>> = [
+            (-1.0, t, 0.0),
+            (1.0, t, 0.0),
+            (-1.0, -t, 0.0),
+            (1.0, -t, 0.0),
+            (0.0, -1.0, t),
+            (0.0, 1.0, t),
+            (0.0, -1.0, -t),
+            (0.0, 1.0, -t),
+            (t, 0.0, -1.0),
+            (t, 0.0, 1.0),
+            (-t, 0.0, -1.0),
+            (-t, 0.0, 1.0),
+        ]
+        .iter()
+        .map(|&(x, y, z)| Point3::from(Vector3::new(x, y, z).normalize()))
+        .collect();
+        let mut faces: Vec<[u32; 3]> = vec![
+            [0, 11, 5],
+            [0, 5, 1],
+            [0, 1, 7],
+            [0, 7, 10],
+            [0, 10, 11],
+            [1, 5, 9],
+            [5, 11, 4],
+            [11, 10, 2],
+            [10, 7, 6],
+            [7, 1, 8],
+            [3, 9, 4],
+            [3, 4, 2],
+            [3, 2, 6],
+            [3, 6, 8],
+            [3, 8, 9],
+            [4, 9, 5],
+            [2, 4, 11],
+            [6, 2, 10],
+            [8, 6, 7],
+            [9, 8, 1],
+        ];
+        for _ in 0..level {
+            let mut midpoints: HashMap<(u32, u32), u32> = HashMap::new();
+            let mut midpoint = |a: u32, b: u32, positions: &mut Vec<Point3<f32>>| {
+                *midpoints.entry((a.min(b), a.max(b))).or_insert_with(|| {
+                    let m =
+                        (positions[a as usize].coords + positions[b as usize].coords).normalize();
+                    positions.push(Point3::from(m));
+                    (positions.len() - 1) as u32
+                })
+            };
+            faces = faces
+                .iter()
+                .flat_map(|&[a, b, c]| {
+                    let ab = midpoint(a, b, &mut positions);
+                    let bc = midpoint(b, c, &mut positions);
+                    let ca = midpoint(c, a, &mut positions);
+                    [[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]
+                })
+                .collect();
+        }
+        Self {
+            positions,
+            faces,
+            ..Self::default()
+        }
     }
 
     /// Checks that every face index exists, attribute arrays are empty or one per vertex, and
@@ -235,33 +339,18 @@ impl TriangleMesh {
 mod tests {
     use super::*;
 
-    /// An axis-aligned box with outward winding.
-    pub(crate) fn cuboid(size: [f32; 3]) -> TriangleMesh {
-        let [x, y, z] = size;
-        let positions = (0..8)
-            .map(|i| {
-                Point3::new(
-                    if i & 1 == 0 { 0.0 } else { x },
-                    if i & 2 == 0 { 0.0 } else { y },
-                    if i & 4 == 0 { 0.0 } else { z },
-                )
-            })
-            .collect();
-        let faces = vec![
-            [0, 2, 1],
-            [1, 2, 3], // bottom (−z)
-            [4, 5, 6],
-            [5, 7, 6], // top (+z)
-            [0, 1, 4],
-            [1, 5, 4], // −y
-            [2, 6, 3],
-            [3, 6, 7], // +y
-            [0, 4, 2],
-            [2, 4, 6], // −x
-            [1, 3, 5],
-            [3, 7, 5], // +x
-        ];
-        TriangleMesh::new(positions, faces).unwrap()
+    fn cuboid(size: [f32; 3]) -> TriangleMesh {
+        TriangleMesh::cuboid(Point3::origin(), Point3::from(size))
+    }
+
+    #[test]
+    fn icosphere_is_closed_and_outward() {
+        let m = TriangleMesh::icosphere(3);
+        assert_eq!(m.face_count(), 20 * 64);
+        m.validate().unwrap();
+        let v = m.volume_properties().unwrap();
+        assert!((v.volume_m3 - 4.0 / 3.0 * std::f64::consts::PI).abs() < 0.05);
+        assert!(v.centroid.coords.norm() < 1e-6);
     }
 
     #[test]

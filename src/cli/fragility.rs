@@ -206,25 +206,15 @@ mod tests {
     fn runs_on_an_obj_block_with_figure() {
         let dir = tempfile::tempdir().unwrap();
         let mesh = dir.path().join("block.obj");
+        let block = scarp_slam::TriangleMesh::cuboid(
+            nalgebra::Point3::origin(),
+            nalgebra::Point3::new(1.0, 1.0, 2.0),
+        );
         let mut text = String::new();
-        for i in 0..8 {
-            let (x, y, z) = (i & 1, (i >> 1) & 1, ((i >> 2) & 1) * 2);
-            text += &format!("v {x} {y} {z}\n");
+        for p in &block.positions {
+            text += &format!("v {} {} {}\n", p.x, p.y, p.z);
         }
-        for f in [
-            [0, 2, 1],
-            [1, 2, 3],
-            [4, 5, 6],
-            [5, 7, 6],
-            [0, 1, 4],
-            [1, 5, 4],
-            [2, 6, 3],
-            [3, 6, 7],
-            [0, 4, 2],
-            [2, 4, 6],
-            [1, 3, 5],
-            [3, 7, 5],
-        ] {
+        for f in &block.faces {
             text += &format!("f {} {} {}\n", f[0] + 1, f[1] + 1, f[2] + 1);
         }
         std::fs::write(&mesh, text).unwrap();

@@ -3,7 +3,7 @@
 
 use std::collections::HashMap;
 
-use nalgebra::{Point3, Vector3};
+use nalgebra::Point3;
 use scarp_slam::TriangleMesh;
 
 use super::topology::Solid;
@@ -90,70 +90,15 @@ pub(crate) fn tube_solid(outer: &[(f64, f64)], inner: &[(f64, f64)], z0: f64, z1
 
 /// An icosphere of radius `r` about the origin after `level` subdivisions.
 pub(crate) fn icosphere(level: usize, r: f64) -> Solid {
-    let t = (1.0 + 5f64.sqrt()) / 2.0;
-    let mut positions: Vec<Point3<f64>> = [
-        (-1.0, t, 0.0),
-        (1.0, t, 0.0),
-        (-1.0, -t, 0.0),
-        (1.0, -t, 0.0),
-        (0.0, -1.0, t),
-        (0.0, 1.0, t),
-        (0.0, -1.0, -t),
-        (0.0, 1.0, -t),
-        (t, 0.0, -1.0),
-        (t, 0.0, 1.0),
-        (-t, 0.0, -1.0),
-        (-t, 0.0, 1.0),
-    ]
-    .iter()
-    .map(|&(x, y, z)| Point3::from(Vector3::new(x, y, z).normalize() * r))
-    .collect();
-    let mut faces: Vec<[u32; 3]> = vec![
-        [0, 11, 5],
-        [0, 5, 1],
-        [0, 1, 7],
-        [0, 7, 10],
-        [0, 10, 11],
-        [1, 5, 9],
-        [5, 11, 4],
-        [11, 10, 2],
-        [10, 7, 6],
-        [7, 1, 8],
-        [3, 9, 4],
-        [3, 4, 2],
-        [3, 2, 6],
-        [3, 6, 8],
-        [3, 8, 9],
-        [4, 9, 5],
-        [2, 4, 11],
-        [6, 2, 10],
-        [8, 6, 7],
-        [9, 8, 1],
-    ];
-    for _ in 0..level {
-        let mut mid: HashMap<(u32, u32), u32> = HashMap::new();
-        let mut next = Vec::with_capacity(faces.len() * 4);
-        for f in &faces {
-            let mut m = [0u32; 3];
-            for k in 0..3 {
-                let (a, b) = (f[k], f[(k + 1) % 3]);
-                let key = (a.min(b), a.max(b));
-                m[k] = *mid.entry(key).or_insert_with(|| {
-                    let p = nalgebra::center(&positions[a as usize], &positions[b as usize]);
-                    positions.push(Point3::from(p.coords.normalize() * r));
-                    positions.len() as u32 - 1
-                });
-            }
-            next.extend([
-                [f[0], m[0], m[2]],
-                [f[1], m[1], m[0]],
-                [f[2], m[2], m[1]],
-                [m[0], m[1], m[2]],
-            ]);
-        }
-        faces = next;
+    let unit = TriangleMesh::icosphere(level as u32);
+    Solid {
+        positions: unit
+            .positions
+            .iter()
+            .map(|p| Point3::from(p.coords.cast::<f64>().normalize() * r))
+            .collect(),
+        faces: unit.faces,
     }
-    Solid { positions, faces }
 }
 
 /// The solid as an f32 mesh.

@@ -40,30 +40,7 @@ impl SplitMix {
 
 /// An axis-aligned box with outward winding, normals and colours.
 pub fn coloured_box() -> TriangleMesh {
-    let positions: Vec<Point3<f32>> = (0..8)
-        .map(|i| {
-            Point3::new(
-                if i & 1 == 0 { -0.5 } else { 0.5 },
-                if i & 2 == 0 { -0.25 } else { 0.25 },
-                if i & 4 == 0 { 0.0 } else { 1.5 },
-            )
-        })
-        .collect();
-    let faces = vec![
-        [0, 2, 1],
-        [1, 2, 3],
-        [4, 5, 6],
-        [5, 7, 6],
-        [0, 1, 4],
-        [1, 5, 4],
-        [2, 6, 3],
-        [3, 6, 7],
-        [0, 4, 2],
-        [2, 4, 6],
-        [1, 3, 5],
-        [3, 7, 5],
-    ];
-    let mut mesh = TriangleMesh::new(positions, faces).unwrap();
+    let mut mesh = TriangleMesh::cuboid(Point3::new(-0.5, -0.25, 0.0), Point3::new(0.5, 0.25, 1.5));
     mesh.compute_vertex_normals();
     mesh.colors = (0..8u8).map(|i| [i * 30, 255 - i * 20, i * i]).collect();
     mesh
