@@ -201,17 +201,31 @@ impl PedestalShape {
     }
 }
 
-/// Flattens the bottom of a rock mesh into a planar facet whose horizontal radius (distance of
-/// the flattened vertices from their centre) is close to `contact_radius_m`, then moves the mesh
-/// so that the facet's centre sits at the origin with the facet at z = 0.
-///
-/// Returns the moved mesh and its contact (in that local frame).
+/// Signed distance of `p` inside a counter-clockwise convex polygon (negative outside).
+fn inside_margin(polygon: &[Point2<f64>], p: &Point2<f64>) -> f64 {
+    (0..polygon.len())
+        .map(|i| {
+            let (a, b) = (polygon[i], polygon[(i + 1) % polygon.len()]);
+            let edge = b - a;
+            (edge.x * (p.y - a.y) - edge.y * (p.x - a.x)) / edge.norm().max(1e-12)
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// Seats a rock on a flat contact, keeping its pose: the bottom is cut flat at the lowest height
+/// where (1) the flattened region's radius reaches `contact_radius_m` and (2) the centre of mass
+/// stands inside the contact polygon by `stability_margin_m`, so the rock is statically stable.
+/// The mesh is then moved so that the contact's centre sits at the origin with the contact at
+/// z = 0. Returns the moved mesh and its contact (in that local frame).
 ///
 /// # Errors
-/// [`DatasetError::Invalid`] when the mesh is empty or the radius is not positive.
+/// [`DatasetError::Invalid`] when the mesh is empty or encloses no volume, the radius is not
+/// positive, or no cut in the lower 45% of the rock puts the centre of mass over the contact
+/// (the rock cannot stand in this pose).
 pub fn seat_on_flat_contact(
     mut mesh: TriangleMesh,
     contact_radius_m: f64,
+    stability_margin_m: f64,
     key: &str,
 ) -> Result<(TriangleMesh, Contact), DatasetError> {
     let (lo, hi) = mesh
@@ -225,41 +239,59 @@ pub fn seat_on_flat_contact(
     }
     let z_min = f64::from(lo.z);
     let height = f64::from(hi.z - lo.z);
-    let below = |cut: f64| -> Vec<Point2<f64>> {
-        mesh.positions
+    let hull_below = |cut: f64| -> Vec<Point2<f64>> {
+        let below: Vec<Point2<f64>> = mesh
+            .positions
             .iter()
             .filter(|p| f64::from(p.z) <= cut)
             .map(|p| Point2::new(f64::from(p.x), f64::from(p.y)))
-            .collect()
+            .collect();
+        convex_hull_2d(&below)
     };
-    let radius_of = |pts: &[Point2<f64>]| -> f64 {
-        if pts.len() < 3 {
+    let radius_of = |hull: &[Point2<f64>]| -> f64 {
+        if hull.len() < 3 {
             return 0.0;
         }
-        let centre = pts
+        let centre = hull
             .iter()
-            .fold(Point2::origin(), |c, p| c + p.coords / pts.len() as f64);
-        pts.iter().map(|p| (p - centre).norm()).fold(0.0, f64::max)
+            .fold(Point2::origin(), |c, p| c + p.coords / hull.len() as f64);
+        hull.iter().map(|p| (p - centre).norm()).fold(0.0, f64::max)
     };
-    // Bisection on the cut depth: the flattened radius grows with depth.
-    let (mut shallow, mut deep) = (0.0, height * 0.45);
+    // The centre of mass of the rock as flattened at `cut` (the cut removes volume).
+    let flattened_com_xy = |cut: f32| -> Option<Point2<f64>> {
+        let mut flat = mesh.clone();
+        for p in &mut flat.positions {
+            p.z = p.z.max(cut);
+        }
+        let com = flat.volume_properties().ok()?.centroid;
+        Some(Point2::new(com.x, com.y))
+    };
+    let acceptable = |depth: f64| {
+        let hull = hull_below(z_min + depth);
+        hull.len() >= 3
+            && radius_of(&hull) >= contact_radius_m
+            && flattened_com_xy((z_min + depth) as f32)
+                .is_some_and(|com| inside_margin(&hull, &com) >= stability_margin_m)
+    };
+    // Both conditions grow with the cut depth: bisect for the shallowest acceptable cut.
+    let max_depth = height * 0.45;
+    if !acceptable(max_depth) {
+        return Err(DatasetError::invalid(
+            format!("{key}.shape"),
+            "the rock cannot stand in this pose: its centre of mass is not over any flat contact in its lower 45%; rotate it",
+        ));
+    }
+    let (mut shallow, mut deep) = (0.0, max_depth);
     for _ in 0..40 {
         let mid = 0.5 * (shallow + deep);
-        if radius_of(&below(z_min + mid)) < contact_radius_m {
-            shallow = mid;
-        } else {
+        if acceptable(mid) {
             deep = mid;
+        } else {
+            shallow = mid;
         }
     }
     let cut = z_min + deep;
-    let flat = below(cut);
-    let hull = convex_hull_2d(&flat);
-    if hull.len() < 3 {
-        return Err(DatasetError::invalid(
-            key,
-            "rock bottom gives no contact polygon",
-        ));
-    }
+    let hull = hull_below(cut);
     let area = polygon_signed_area(&hull);
     let centre = hull
         .iter()
@@ -310,7 +342,7 @@ mod tests {
     #[test]
     fn seated_rock_has_the_requested_narrow_contact() {
         let m = BoulderShape::default().mesh("rock").unwrap();
-        let (seated, contact) = seat_on_flat_contact(m, 0.15, "rock").unwrap();
+        let (seated, contact) = seat_on_flat_contact(m, 0.15, 0.03, "rock").unwrap();
         let (lo, _) = seated.bounds().unwrap();
         assert!(lo.z.abs() < 1e-6);
         // A disc of radius ~0.15 m: the hull area is within a factor of that disc's.

@@ -41,6 +41,20 @@ fn default_world_has_precarious_targets_and_distractors() {
         );
         assert!(target.centroid.z - contact.height_m > 0.4);
         assert!(target.volume_m3 > 0.1);
+        // Statically stable: the centre of mass stands inside the contact polygon, with margin.
+        let polygon = &contact.polygon_xy_m;
+        let margin = (0..polygon.len())
+            .map(|i| {
+                let (a, b) = (polygon[i], polygon[(i + 1) % polygon.len()]);
+                let (ex, ey) = (b[0] - a[0], b[1] - a[1]);
+                (ex * (target.centroid.y - a[1]) - ey * (target.centroid.x - a[0])) / ex.hypot(ey)
+            })
+            .fold(f64::INFINITY, f64::min);
+        assert!(
+            margin > 0.02,
+            "rock {}: centre of mass {margin} m inside the contact edge",
+            target.id
+        );
     }
 }
 

@@ -20,6 +20,11 @@ use crate::rock::{Contact, seat_on_flat_contact};
 use crate::terrain::Heightfield;
 use crate::texture::AlbedoMap;
 
+/// How far inside its contact polygon a seated rock's centre of mass must stand, as a fraction
+/// of the requested contact radius, so that targets stand stably (the default world's have
+/// α_min of about 4–11°) rather than balanced on an edge.
+pub const STABILITY_MARGIN_FRACTION: f64 = 0.25;
+
 /// The built-in default world's TOML.
 pub const DEFAULT_WORLD_TOML: &str = include_str!("default.toml");
 
@@ -275,7 +280,26 @@ fn place_rock(
                     ),
                 ));
             }
-            let (seated, contact) = seat_on_flat_contact(mesh, rock.contact_radius_m, key)?;
+            let (seated, contact) = seat_on_flat_contact(
+                mesh,
+                rock.contact_radius_m,
+                STABILITY_MARGIN_FRACTION * rock.contact_radius_m,
+                key,
+            )?;
+            let overhang_m = contact
+                .polygon_xy_m
+                .iter()
+                .map(|p| p[0].hypot(p[1]))
+                .fold(0.0, f64::max);
+            if overhang_m > pedestal.top_radius_m {
+                return Err(DatasetError::invalid(
+                    format!("{key}.pedestal.top_radius_m"),
+                    format!(
+                        "the rock's flat contact reaches {overhang_m:.3} m from the axis, beyond the pedestal's top radius {} m",
+                        pedestal.top_radius_m
+                    ),
+                ));
+            }
             let top_z = ground_z + pedestal.height_m;
             // The foot follows the lowest terrain under the column so it never floats.
             let foot_z = (0..16)
