@@ -1,6 +1,7 @@
 //! The `scarp` command line: one module per subcommand, each with its own clap `Args` struct and a
 //! `run` function.
 
+pub mod config;
 pub mod fragility;
 pub mod render;
 pub mod simulate;
@@ -33,6 +34,8 @@ pub enum Command {
     Render(render::RenderArgs),
     /// Write a world's ground-truth meshes and `world.json`.
     World(world::WorldArgs),
+    /// Print every tunable with its default, as TOML.
+    Config(config::ConfigArgs),
 }
 
 /// Runs a parsed command line.
@@ -46,6 +49,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Simulate(args) => simulate::run(args),
         Command::Render(args) => render::run(args),
         Command::World(args) => world::run(args),
+        Command::Config(args) => config::run(args),
     }
 }
 
