@@ -1,8 +1,8 @@
 //! # scarp-slam
 //!
 //! The geometry core and mapping engine of scarp: pinhole cameras, rigid transforms, RGBD frames,
-//! image pyramids, triangle meshes and point clouds. Later stages (odometry, TSDF fusion,
-//! marching cubes, features, bundle adjustment) build on these types.
+//! image pyramids, triangle meshes and point clouds; RGBD odometry and keyframe selection. Later
+//! stages (TSDF fusion, marching cubes, features, bundle adjustment) build on these types.
 //!
 //! Conventions, which every public item follows:
 //! - World is local ENU (x east, y north, z up), in metres.
@@ -33,7 +33,9 @@ pub mod error;
 pub mod frame;
 pub mod geometry;
 pub mod image;
+pub mod keyframes;
 pub mod mesh;
+pub mod odometry;
 pub mod point_cloud;
 
 pub use error::SlamError;
