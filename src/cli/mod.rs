@@ -1,7 +1,9 @@
 //! The `scarp` command line: one module per subcommand, each with its own clap `Args` struct and a
 //! `run` function.
 
+pub mod eval;
 pub mod fragility;
+pub mod odometry;
 pub mod render;
 pub mod simulate;
 pub mod world;
@@ -29,6 +31,10 @@ pub enum Command {
     Fragility(fragility::FragilityArgs),
     /// Run the simulated mission on a world (the main job).
     Simulate(simulate::SimulateArgs),
+    /// Evaluate results against ground truth (`eval traj`).
+    Eval(eval::EvalArgs),
+    /// Track a sequence with RGBD odometry and write its trajectory.
+    Odometry(odometry::OdometryArgs),
     /// Render a camera path through a world into a TUM RGB-D sequence.
     Render(render::RenderArgs),
     /// Write a world's ground-truth meshes and `world.json`.
@@ -44,6 +50,8 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Fragility(args) => fragility::run(args),
         Command::Simulate(args) => simulate::run(args),
+        Command::Eval(args) => eval::run(args),
+        Command::Odometry(args) => odometry::run(args),
         Command::Render(args) => render::run(args),
         Command::World(args) => world::run(args),
     }
