@@ -6,7 +6,7 @@ use std::time::Instant;
 
 use anyhow::Context;
 use clap::{Args, ValueEnum};
-use nalgebra::Isometry3;
+use nalgebra::{Isometry3, UnitQuaternion};
 use scarp_datasets::sequence::Sequence;
 use scarp_export::atomic::write_bytes_atomically;
 use scarp_export::tum::{StampedPose, write_tum_trajectory};
@@ -132,7 +132,7 @@ pub fn track_sequence(
         let timestamp_s = sequence.entries[i].timestamp_s;
         let started = Instant::now();
         let pyramid = frame_pyramid(&frame, odo.levels);
-        let world_from_camera = match (&reference, result.poses.last()) {
+        let world_from_camera = renormalized(&match (&reference, result.poses.last()) {
             (Some((reference_images, world_from_reference)), Some(previous)) => {
                 let previous_pose = previous.world_from_camera;
                 let relative = match (estimate(i - 1), estimate(i)) {
@@ -142,6 +142,14 @@ pub fn track_sequence(
                 let guess = world_from_reference.inverse() * previous_pose * relative;
                 let source = SourceFrame::from_pyramid(&camera, &pyramid, odo)?;
                 let tracked = track(reference_images, &source, &guess, odo)?;
+                tracing::debug!(
+                    frame = i,
+                    iterations = tracked.iterations,
+                    inlier_ratio = tracked.inlier_ratio,
+                    correspondences = tracked.correspondences,
+                    failure = ?tracked.failure,
+                    "tracked"
+                );
                 match &tracked.failure {
                     None => *world_from_reference * tracked.reference_from_current,
                     Some(failure) => {
@@ -151,7 +159,7 @@ pub fn track_sequence(
                 }
             }
             _ => estimate(i).unwrap_or_else(Isometry3::identity),
-        };
+        });
         let failed_now = result.failures.last().is_some_and(|(k, _)| *k == i);
         let new_reference = match mode {
             ReferenceMode::Previous => true,
@@ -171,6 +179,7 @@ pub fn track_sequence(
                 world_from_camera,
             ));
             result.keyframes.push(i);
+            tracing::debug!(frame = i, "new reference");
         }
         if i > 0 {
             result
@@ -184,6 +193,15 @@ pub fn track_sequence(
         on_frame();
     }
     Ok(result)
+}
+
+/// The transform with its quaternion renormalised: chained products drift off unit length, and
+/// the drift would grow with every frame.
+fn renormalized(t: &Isometry3<f64>) -> Isometry3<f64> {
+    Isometry3::from_parts(
+        t.translation,
+        UnitQuaternion::new_normalize(*t.rotation.quaternion()),
+    )
 }
 
 fn median(values: &[f64]) -> f64 {

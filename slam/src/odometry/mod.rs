@@ -203,13 +203,15 @@ pub fn track(
         iterations: 0,
         failure: Some(failure),
     };
-    let guess = *initial_reference_from_current;
-    if !is_finite(&guess) {
+    if !is_finite(initial_reference_from_current) {
         return Ok(failed(
             Isometry3::identity(),
             OdometryFailure::NonFiniteInitialGuess,
         ));
     }
+    // A guess chained from many products may carry a quaternion slightly off unit length;
+    // the linearisation's rotation matrix assumes unit length.
+    let guess = renormalized(initial_reference_from_current);
     let required = config
         .min_correspondences
         .max((config.min_correspondence_fraction * current.camera.pixel_count() as f64) as usize);
@@ -250,10 +252,12 @@ pub fn track(
                     },
                 ));
             }
-            estimate = Isometry3::from_parts(
-                Translation3::from(step.0),
-                UnitQuaternion::from_scaled_axis(step.1),
-            ) * estimate;
+            estimate = renormalized(
+                &(Isometry3::from_parts(
+                    Translation3::from(step.0),
+                    UnitQuaternion::from_scaled_axis(step.1),
+                ) * estimate),
+            );
             let converged =
                 dt < config.convergence_translation_m && dw < config.convergence_rotation_rad;
             let stalled = cost_per_point > last_cost_per_point * (1.0 + 1e-9) && level > 0;
@@ -302,6 +306,13 @@ pub fn track_frames(
     let current =
         SourceFrame::from_pyramid(camera, &frame_pyramid(current, config.levels), config)?;
     track(&reference, &current, initial_reference_from_current, config)
+}
+
+fn renormalized(t: &Isometry3<f64>) -> Isometry3<f64> {
+    Isometry3::from_parts(
+        t.translation,
+        UnitQuaternion::new_normalize(*t.rotation.quaternion()),
+    )
 }
 
 fn is_finite(t: &Isometry3<f64>) -> bool {
