@@ -49,6 +49,27 @@ fn bench(c: &mut Criterion) {
         r.failure
     );
 
+    // The machine may be shared: report the process CPU time per call too (Linux), which does
+    // not grow with other processes' load. Wall time on an idle 2-core machine is about
+    // CPU time / 2 when both cores are busy.
+    if let Some(start) = process_cpu_s() {
+        let n = 40;
+        for _ in 0..n {
+            std::hint::black_box(track(&reference, &source, &guess, &config).expect("track"));
+        }
+        let gn = process_cpu_s().map(|t| (t - start) / f64::from(n) * 1e3);
+        let start = process_cpu_s().unwrap_or(0.0);
+        for _ in 0..n {
+            let p = pyramid(1);
+            let s = SourceFrame::from_pyramid(&camera, &p, &config).expect("source");
+            std::hint::black_box(track(&reference, &s, &guess, &config).expect("track"));
+        }
+        let frame = process_cpu_s().map(|t| (t - start) / f64::from(n) * 1e3);
+        eprintln!(
+            "CPU ms per call: gauss-newton {gn:?}, pyramid + points + gauss-newton {frame:?}"
+        );
+    }
+
     let mut group = c.benchmark_group("odometry");
     group.sample_size(20);
     // What a sequence pays per frame: the new frame's pyramid, its points, tracking, and its
@@ -74,6 +95,17 @@ fn bench(c: &mut Criterion) {
         b.iter(|| SourceFrame::from_pyramid(&camera, &p, &config).expect("source"))
     });
     group.finish();
+}
+
+/// User + system CPU seconds of this process, from `/proc/self/stat` (100 ticks a second).
+fn process_cpu_s() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // Fields after the parenthesised command name; utime and stime are fields 14 and 15.
+    let rest = &stat[stat.rfind(')')? + 2..];
+    let fields: Vec<&str> = rest.split_whitespace().collect();
+    let utime: f64 = fields.get(11)?.parse().ok()?;
+    let stime: f64 = fields.get(12)?.parse().ok()?;
+    Some((utime + stime) / 100.0)
 }
 
 criterion_group!(benches, bench);

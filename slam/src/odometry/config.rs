@@ -15,9 +15,11 @@ pub struct OdometryConfig {
     /// (80×60) absorbs initial-guess errors of a few degrees.
     pub levels: usize,
     /// Gauss–Newton iterations per level, finest level first. Missing entries repeat the last.
-    /// Default `[6, 10, 15, 20]`.
+    /// Default `[4, 6, 8, 10]`.
     pub max_iterations: Vec<usize>,
-    /// Stop a level when the update is smaller than this translation, metres. Default 1e-5 m.
+    /// Stop a level when the update is smaller than this translation, metres (at level k the
+    /// thresholds are 2^k times larger: coarse levels only need to bring the estimate within
+    /// reach of the next). Default 1e-5 m.
     pub convergence_translation_m: f64,
     /// … and smaller than this rotation, radians. Default 1e-5 rad (0.0006°).
     pub convergence_rotation_rad: f64,
@@ -64,6 +66,10 @@ pub struct OdometryConfig {
     pub max_correction_m: f64,
     /// Failure: the result turned farther than this from the initial guess. Default 15°.
     pub max_correction_deg: f64,
+    /// At most this many current-frame points per level take part (every k-th valid pixel is
+    /// kept): this bounds the cost of the finest levels. 0 keeps all. Default 30 000 (of the
+    /// 307 200 pixels of a 640×480 frame; level 1 has at most 76 800).
+    pub max_points_per_level: usize,
     /// Current-frame points handled per parallel chunk; partial sums are added in chunk order,
     /// so results do not depend on the thread count. Default 4096.
     pub chunk_points: usize,
@@ -73,7 +79,7 @@ impl Default for OdometryConfig {
     fn default() -> Self {
         Self {
             levels: 4,
-            max_iterations: vec![6, 10, 15, 20],
+            max_iterations: vec![4, 6, 8, 10],
             convergence_translation_m: 1e-5,
             convergence_rotation_rad: 1e-5,
             photometric_sigma: 0.02,
@@ -93,6 +99,7 @@ impl Default for OdometryConfig {
             min_eigenvalue_ratio: 1e-5,
             max_correction_m: 0.5,
             max_correction_deg: 15.0,
+            max_points_per_level: 30_000,
             chunk_points: 4096,
         }
     }

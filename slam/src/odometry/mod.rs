@@ -149,9 +149,10 @@ pub struct OdometryResult {
     /// residuals: the information matrix of a left perturbation δ = (translation m, rotation
     /// rad) in the reference frame, `reference_from_current ← exp(δ)·reference_from_current`.
     pub information: Matrix6<f64>,
-    /// Inliers (all residuals within `inlier_sigmas`) over current-frame pixels with depth.
+    /// Inliers (all residuals within `inlier_sigmas`) over the tracked current-frame points
+    /// (pixels with depth, subsampled as `max_points_per_level` says).
     pub inlier_ratio: f64,
-    /// Finest-level correspondences.
+    /// Finest-level correspondences among the tracked points.
     pub correspondences: usize,
     /// Gauss–Newton iterations, all levels.
     pub iterations: usize,
@@ -258,8 +259,9 @@ pub fn track(
                     UnitQuaternion::from_scaled_axis(step.1),
                 ) * estimate),
             );
-            let converged =
-                dt < config.convergence_translation_m && dw < config.convergence_rotation_rad;
+            let level_scale = f64::from(1u32 << level);
+            let converged = dt < config.convergence_translation_m * level_scale
+                && dw < config.convergence_rotation_rad * level_scale;
             let stalled = cost_per_point > last_cost_per_point * (1.0 + 1e-9) && level > 0;
             last_cost_per_point = cost_per_point;
             if converged || stalled {
@@ -267,13 +269,11 @@ pub fn track(
             }
         }
     }
-    // The information and statistics at the final estimate, finest level.
-    let final_eq = normal_equations(&reference.levels[0], &current.levels[0], &estimate, config);
-    if final_eq.correspondences >= 6 {
-        finest = final_eq;
-    }
+    // The information and statistics come from the last finest-level linearisation (one small
+    // step before the final estimate: the step was below the convergence threshold or the
+    // iteration budget ran out).
     let information = finest.hessian();
-    let inlier_ratio = finest.inliers as f64 / current.valid_pixels().max(1) as f64;
+    let inlier_ratio = finest.inliers as f64 / current.tracked_points().max(1) as f64;
     let mut result = OdometryResult {
         reference_from_current: estimate,
         information,
@@ -282,7 +282,17 @@ pub fn track(
         iterations,
         failure: None,
     };
-    result.failure = judge(&result, &finest, &guess, required, config);
+    // Correspondences at full resolution, estimated from the subsampled points.
+    let scale = current.valid_pixels() as f64 / current.tracked_points().max(1) as f64;
+    let full_correspondences = (finest.correspondences as f64 * scale).round() as usize;
+    result.failure = judge(
+        &result,
+        &finest,
+        full_correspondences,
+        &guess,
+        required,
+        config,
+    );
     if result.failure.is_some() {
         result.reference_from_current = guess;
     }
@@ -357,6 +367,7 @@ pub(crate) fn eigenvalue_ratio(h: &Matrix6<f64>, depth_m: f64) -> f64 {
 fn judge(
     result: &OdometryResult,
     finest: &NormalEquations,
+    full_correspondences: usize,
     guess: &Isometry3<f64>,
     required: usize,
     config: &OdometryConfig,
@@ -374,9 +385,9 @@ fn judge(
             correction_deg,
         });
     }
-    if finest.correspondences < required {
+    if full_correspondences < required {
         return Some(OdometryFailure::TooFewCorrespondences {
-            found: finest.correspondences,
+            found: full_correspondences,
             required,
         });
     }

@@ -10,7 +10,7 @@ use nalgebra::{Isometry3, Matrix6, Vector6};
 use rayon::prelude::*;
 
 use super::OdometryConfig;
-use super::reference::ReferenceLevel;
+use super::reference::{RefPixel, ReferenceLevel};
 use super::source::SourcePoint;
 
 /// Σ w·JᵀJ, Σ w·Jᵀr and counts over a set of points.
@@ -135,6 +135,10 @@ fn jacobian(a: [f32; 3], q: [f32; 3]) -> [f32; 6] {
 
 /// Per-level constants of the linearisation.
 struct Weights {
+    fx: f32,
+    fy: f32,
+    cx: f32,
+    cy: f32,
     photometric_info: f32,
     photometric_sigma: f32,
     geometric_info_scale: f32,
@@ -158,6 +162,10 @@ pub(crate) fn normal_equations(
     let m = rot.matrix().cast::<f32>();
     let t = reference_from_current.translation.vector.cast::<f32>();
     let weights = Weights {
+        fx: reference.camera.fx as f32,
+        fy: reference.camera.fy as f32,
+        cx: reference.camera.cx as f32,
+        cy: reference.camera.cy as f32,
         photometric_info: (config.photometric_weight
             / (config.photometric_sigma * config.photometric_sigma))
             as f32,
@@ -205,11 +213,10 @@ fn accumulate_point(
     if !(q[2] > 1e-6) {
         return;
     }
-    let cam = &reference.camera;
     let inv_z = 1.0 / q[2];
-    let (fx, fy) = (cam.fx as f32, cam.fy as f32);
-    let u = fx * q[0] * inv_z + cam.cx as f32;
-    let v = fy * q[1] * inv_z + cam.cy as f32;
+    let (fx, fy) = (w.fx, w.fy);
+    let u = fx * q[0] * inv_z + w.cx;
+    let v = fy * q[1] * inv_z + w.cy;
     // Bilinear sampling needs (u0, v0) and (u0 + 1, v0 + 1) inside the image.
     if !(u >= 0.0 && v >= 0.0) {
         return;
@@ -220,7 +227,8 @@ fn accumulate_point(
     }
     let (fu, fv) = (u - u0 as f32, v - v0 as f32);
     let nearest = (v0 + usize::from(fv >= 0.5)) * reference.width + u0 + usize::from(fu >= 0.5);
-    let vertex = reference.vertices[nearest];
+    let pixels = &reference.pixels;
+    let vertex = pixels[nearest].vertex;
     if vertex[2] <= 0.0 {
         return;
     }
@@ -232,7 +240,7 @@ fn accumulate_point(
     sums.depth_sum += vertex[2];
     let mut inlier = true;
 
-    let n = reference.normals[nearest];
+    let n = pixels[nearest].normal;
     if w.geometric_on && (n[0] != 0.0 || n[1] != 0.0 || n[2] != 0.0) {
         let r = n[0] * d[0] + n[1] * d[1] + n[2] * d[2];
         let sigma = w.geometric_sigma_1m * vertex[2] * vertex[2];
@@ -246,15 +254,19 @@ fn accumulate_point(
 
     if w.photometric_on {
         let i0 = v0 * reference.width + u0;
-        let width = reference.width;
-        let bilinear = |img: &[f32]| {
-            let top = img[i0] + (img[i0 + 1] - img[i0]) * fu;
-            let bottom = img[i0 + width] + (img[i0 + width + 1] - img[i0 + width]) * fu;
+        let (p00, p01) = (&pixels[i0], &pixels[i0 + 1]);
+        let (p10, p11) = (
+            &pixels[i0 + reference.width],
+            &pixels[i0 + reference.width + 1],
+        );
+        let bilinear = |get: fn(&RefPixel) -> f32| {
+            let top = get(p00) + (get(p01) - get(p00)) * fu;
+            let bottom = get(p10) + (get(p11) - get(p10)) * fu;
             top + (bottom - top) * fv
         };
-        let r = bilinear(&reference.intensity) - intensity;
-        let gu = bilinear(&reference.grad_u);
-        let gv = bilinear(&reference.grad_v);
+        let r = bilinear(|p| p.intensity) - intensity;
+        let gu = bilinear(|p| p.grad_u);
+        let gv = bilinear(|p| p.grad_v);
         let a0 = gu * fx * inv_z;
         let a1 = gv * fy * inv_z;
         let a2 = -(a0 * q[0] + a1 * q[1]) * inv_z;

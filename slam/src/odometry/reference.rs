@@ -23,20 +23,28 @@ pub struct RaycastImages {
     pub intensity: GrayImage,
 }
 
+/// One reference pixel: everything the linearisation reads at a pixel, packed together so a
+/// lookup touches few cache lines.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub(crate) struct RefPixel {
+    /// Camera-frame point; z = 0 marks no surface.
+    pub vertex: [f32; 3],
+    /// Unit normal facing the camera; zero when unknown.
+    pub normal: [f32; 3],
+    /// Intensity.
+    pub intensity: f32,
+    /// ∂I/∂u and ∂I/∂v (central differences; 0 on the border).
+    pub grad_u: f32,
+    pub grad_v: f32,
+}
+
 /// One pyramid level of a reference, row-major, `width × height`.
 #[derive(Debug, Clone)]
 pub(crate) struct ReferenceLevel {
     pub camera: PinholeCamera,
     pub width: usize,
     pub height: usize,
-    /// Camera-frame points; z = 0 marks no surface.
-    pub vertices: Vec<[f32; 3]>,
-    /// Unit normals facing the camera; zero when unknown.
-    pub normals: Vec<[f32; 3]>,
-    pub intensity: Vec<f32>,
-    /// ∂I/∂u and ∂I/∂v (central differences; 0 on the border).
-    pub grad_u: Vec<f32>,
-    pub grad_v: Vec<f32>,
+    pub pixels: Vec<RefPixel>,
 }
 
 /// The reference a frame is tracked against, as a pyramid (level 0 is full resolution).
@@ -159,17 +167,23 @@ fn build_level(
     gray: &GrayImage,
 ) -> ReferenceLevel {
     let (width, height) = (camera.width as usize, camera.height as usize);
-    let intensity = gray.as_slice().to_vec();
-    let (grad_u, grad_v) = gradients(&intensity, width, height);
+    let intensity = gray.as_slice();
+    let (grad_u, grad_v) = gradients(intensity, width, height);
+    let pixels = (0..vertices.len())
+        .into_par_iter()
+        .map(|i| RefPixel {
+            vertex: vertices[i],
+            normal: normals[i],
+            intensity: intensity[i],
+            grad_u: grad_u[i],
+            grad_v: grad_v[i],
+        })
+        .collect();
     ReferenceLevel {
         camera,
         width,
         height,
-        vertices,
-        normals,
-        intensity,
-        grad_u,
-        grad_v,
+        pixels,
     }
 }
 
@@ -182,6 +196,7 @@ fn vertex_map(camera: &PinholeCamera, depth: &DepthImage) -> Vec<[f32; 3]> {
         camera.cx as f32,
         camera.cy as f32,
     );
+    let (inv_fx, inv_fy) = (1.0 / fx, 1.0 / fy);
     depth
         .as_slice()
         .par_iter()
@@ -189,7 +204,7 @@ fn vertex_map(camera: &PinholeCamera, depth: &DepthImage) -> Vec<[f32; 3]> {
         .map(|(i, &z)| {
             if z > 0.0 && z.is_finite() {
                 let (u, v) = ((i % w) as f32, (i / w) as f32);
-                [(u - cx) / fx * z, (v - cy) / fy * z, z]
+                [(u - cx) * inv_fx * z, (v - cy) * inv_fy * z, z]
             } else {
                 [0.0; 3]
             }

@@ -19,7 +19,10 @@ pub(crate) struct SourcePoint {
 /// the configured range.
 #[derive(Debug, Clone)]
 pub struct SourceFrame {
+    /// Per level, the (possibly subsampled) points used for tracking.
     pub(crate) levels: Vec<Vec<SourcePoint>>,
+    /// Per level, the number of pixels with a usable depth before subsampling.
+    pub(crate) valid_per_level: Vec<usize>,
     pub(crate) camera: PinholeCamera,
 }
 
@@ -37,36 +40,59 @@ impl SourceFrame {
         config.validate()?;
         check_pyramid(camera, pyramid, config.levels)?;
         let (min_z, max_z) = (config.min_depth_m as f32, config.max_depth_m as f32);
-        let levels = (0..config.levels)
+        let (levels, valid_per_level) = (0..config.levels)
             .map(|level| {
                 let cam = camera.downsampled(level as u32);
                 let w = cam.width as usize;
                 let (fx, fy, cx, cy) = (cam.fx as f32, cam.fy as f32, cam.cx as f32, cam.cy as f32);
+                let (inv_fx, inv_fy) = (1.0 / fx, 1.0 / fy);
                 let depth = pyramid.depth_m[level].as_slice();
                 let gray = pyramid.gray[level].as_slice();
-                depth
+                let points: Vec<SourcePoint> = depth
                     .par_chunks(w)
                     .enumerate()
                     .flat_map_iter(|(v, row)| {
                         row.iter().enumerate().filter_map(move |(u, &z)| {
                             let i = v * w + u;
                             (z >= min_z && z <= max_z && gray[i].is_finite()).then(|| SourcePoint {
-                                p: [(u as f32 - cx) / fx * z, (v as f32 - cy) / fy * z, z],
+                                p: [
+                                    (u as f32 - cx) * inv_fx * z,
+                                    (v as f32 - cy) * inv_fy * z,
+                                    z,
+                                ],
                                 intensity: gray[i],
                             })
                         })
                     })
-                    .collect()
+                    .collect();
+                let valid = points.len();
+                (subsample(points, config.max_points_per_level), valid)
             })
-            .collect();
+            .unzip();
         Ok(Self {
             levels,
+            valid_per_level,
             camera: *camera,
         })
     }
 
     /// Number of full-resolution pixels with a usable depth.
     pub fn valid_pixels(&self) -> usize {
+        self.valid_per_level.first().copied().unwrap_or(0)
+    }
+
+    /// Full-resolution points used for tracking (after subsampling).
+    pub fn tracked_points(&self) -> usize {
         self.levels.first().map_or(0, Vec::len)
     }
+}
+
+/// Keeps every k-th point, with the smallest k that leaves at most `max` (row-major order,
+/// so the kept points spread evenly over the image).
+fn subsample(points: Vec<SourcePoint>, max: usize) -> Vec<SourcePoint> {
+    if points.len() <= max || max == 0 {
+        return points;
+    }
+    let step = points.len().div_ceil(max);
+    points.into_iter().step_by(step).collect()
 }
