@@ -29,6 +29,9 @@
 //! assert!((pixel.x - camera.cx).abs() < 1e-9 && (pixel.y - camera.cy).abs() < 1e-9);
 //! ```
 
+// `!(x > 0.0)` is the NaN-rejecting form of `x <= 0.0`: bad input must fail the check.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 pub mod error;
 pub mod frame;
 pub mod geometry;

@@ -230,7 +230,7 @@ pub fn umeyama(
     }
     let rotation = Rotation3::from_matrix_unchecked(u * s * v_t);
     let scale = if with_scale {
-        if !(var_x > 0.0) {
+        if var_x.is_nan() || var_x <= 0.0 {
             return Err(TrajectoryEvalError::Degenerate(
                 "all estimated positions coincide; no scale",
             ));

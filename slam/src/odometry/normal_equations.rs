@@ -90,8 +90,8 @@ impl ChunkSums {
         let mut k = 0;
         for a in 0..6 {
             let wa = w * j[a];
-            for b in a..6 {
-                self.h[k] += wa * j[b];
+            for &jb in &j[a..] {
+                self.h[k] += wa * jb;
                 k += 1;
             }
             self.g[a] += wa * r;
