@@ -1,8 +1,9 @@
 //! # scarp-slam
 //!
 //! The geometry core and mapping engine of scarp: pinhole cameras, rigid transforms, RGBD frames,
-//! image pyramids, triangle meshes and point clouds. Later stages (odometry, TSDF fusion,
-//! marching cubes, features, bundle adjustment) build on these types.
+//! image pyramids, triangle meshes and point clouds; voxel-hashed TSDF fusion and raycasting
+//! ([`tsdf`]) and marching-cubes meshing ([`meshing`]). Later stages (odometry, features, bundle
+//! adjustment) build on these.
 //!
 //! Conventions, which every public item follows:
 //! - World is local ENU (x east, y north, z up), in metres.
@@ -34,7 +35,9 @@ pub mod frame;
 pub mod geometry;
 pub mod image;
 pub mod mesh;
+pub mod meshing;
 pub mod point_cloud;
+pub mod tsdf;
 
 pub use error::SlamError;
 pub use frame::RgbdFrame;
