@@ -1,7 +1,9 @@
 //! The `scarp` command line: one module per subcommand, each with its own clap `Args` struct and a
 //! `run` function.
 
+pub mod eval;
 pub mod fragility;
+pub mod map;
 pub mod render;
 pub mod simulate;
 pub mod world;
@@ -33,6 +35,11 @@ pub enum Command {
     Render(render::RenderArgs),
     /// Write a world's ground-truth meshes and `world.json`.
     World(world::WorldArgs),
+    /// Fuse an RGB-D sequence into a TSDF volume and mesh it (`mesh.ply`, `mesh.glb`,
+    /// `map.json`).
+    Map(map::MapArgs),
+    /// Evaluate outputs against the ground truth (`scarp eval mesh ...`).
+    Eval(eval::EvalArgs),
 }
 
 /// Runs a parsed command line.
@@ -46,6 +53,8 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Simulate(args) => simulate::run(args),
         Command::Render(args) => render::run(args),
         Command::World(args) => world::run(args),
+        Command::Map(args) => map::run(args),
+        Command::Eval(args) => eval::run(args),
     }
 }
 
