@@ -47,6 +47,9 @@ pub struct RaycastOutput {
     pub rgb: RgbImage,
 }
 
+/// One pixel's result: z-depth, camera-frame normal, colour.
+type RayHit = (f32, [f32; 3], [u8; 3]);
+
 /// Raycasts `volume` from `camera` at `world_from_camera`: the first zero crossing from positive
 /// to negative TSDF along each pixel ray.
 ///
@@ -70,7 +73,7 @@ pub fn raycast(
         .matrix()
         .cast::<f32>();
     let camera_from_world_rotation = rotation.transpose();
-    let rows: Vec<Vec<(f32, [f32; 3], [u8; 3])>> = (0..height)
+    let rows: Vec<Vec<RayHit>> = (0..height)
         .into_par_iter()
         .map(|v| {
             (0..width)

@@ -321,7 +321,9 @@ fn box_is_accurate_and_complete() {
     check_watertight(&mesh);
 }
 
-fn bits(volume: &TsdfVolume) -> Vec<(BlockCoord, Vec<u32>, Vec<u32>, Vec<[u8; 3]>)> {
+type BlockBits = (BlockCoord, Vec<u32>, Vec<u32>, Vec<[u8; 3]>);
+
+fn bits(volume: &TsdfVolume) -> Vec<BlockBits> {
     let mut out: Vec<_> = volume
         .block_coords()
         .iter()
