@@ -13,9 +13,13 @@ use scarp_slam::tsdf::{Roi, TsdfConfig, TsdfVolume};
 use scarp_slam::{PinholeCamera, RgbdFrame};
 
 fn bench(c: &mut Criterion) {
-    let world = World::builtin_default();
+    let world = World::builtin_default().expect("default world");
     let camera = PinholeCamera::from_hfov(640, 480, 80.0).expect("valid camera");
-    let poses = default_orbit(&world, 24).expect("orbit");
+    let poses: Vec<_> = default_orbit(&world, 24)
+        .expect("orbit")
+        .into_iter()
+        .map(|p| p.world_from_camera)
+        .collect();
     let renderer = Renderer::new(&world);
     let frames: Vec<RgbdFrame> = poses
         .iter()
