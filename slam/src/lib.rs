@@ -1,8 +1,10 @@
 //! # scarp-slam
 //!
 //! The geometry core and mapping engine of scarp: pinhole cameras, rigid transforms, RGBD frames,
-//! image pyramids, triangle meshes and point clouds; RGBD odometry and keyframe selection. Later
-//! stages (TSDF fusion, marching cubes, features, bundle adjustment) build on these types.
+//! image pyramids, triangle meshes and point clouds; RGBD odometry ([`odometry`]) and keyframe
+//! selection ([`keyframes`]); voxel-hashed TSDF fusion and raycasting ([`tsdf`]) and
+//! marching-cubes meshing ([`meshing`]). Later stages (features, bundle adjustment) build on
+//! these.
 //!
 //! Conventions, which every public item follows:
 //! - World is local ENU (x east, y north, z up), in metres.
@@ -38,8 +40,10 @@ pub mod geometry;
 pub mod image;
 pub mod keyframes;
 pub mod mesh;
+pub mod meshing;
 pub mod odometry;
 pub mod point_cloud;
+pub mod tsdf;
 
 pub use error::SlamError;
 pub use frame::RgbdFrame;

@@ -3,6 +3,7 @@
 
 pub mod eval;
 pub mod fragility;
+pub mod map;
 pub mod odometry;
 pub mod render;
 pub mod simulate;
@@ -31,7 +32,7 @@ pub enum Command {
     Fragility(fragility::FragilityArgs),
     /// Run the simulated mission on a world (the main job).
     Simulate(simulate::SimulateArgs),
-    /// Evaluate results against ground truth (`eval traj`).
+    /// Evaluate outputs against the ground truth (`scarp eval mesh ...`, `scarp eval traj ...`).
     Eval(eval::EvalArgs),
     /// Track a sequence with RGBD odometry and write its trajectory.
     Odometry(odometry::OdometryArgs),
@@ -39,6 +40,9 @@ pub enum Command {
     Render(render::RenderArgs),
     /// Write a world's ground-truth meshes and `world.json`.
     World(world::WorldArgs),
+    /// Fuse an RGB-D sequence into a TSDF volume and mesh it (`mesh.ply`, `mesh.glb`,
+    /// `map.json`).
+    Map(map::MapArgs),
 }
 
 /// Runs a parsed command line.
@@ -54,6 +58,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Odometry(args) => odometry::run(args),
         Command::Render(args) => render::run(args),
         Command::World(args) => world::run(args),
+        Command::Map(args) => map::run(args),
     }
 }
 

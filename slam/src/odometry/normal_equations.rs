@@ -252,13 +252,18 @@ fn accumulate_point(
         inlier &= e.abs() <= w.inlier_sigmas;
     }
 
-    if w.photometric_on {
-        let i0 = v0 * reference.width + u0;
-        let (p00, p01) = (&pixels[i0], &pixels[i0 + 1]);
-        let (p10, p11) = (
-            &pixels[i0 + reference.width],
-            &pixels[i0 + reference.width + 1],
-        );
+    let i0 = v0 * reference.width + u0;
+    let (p00, p01) = (&pixels[i0], &pixels[i0 + 1]);
+    let (p10, p11) = (
+        &pixels[i0 + reference.width],
+        &pixels[i0 + reference.width + 1],
+    );
+    let photometric_ok = !reference.intensity_needs_surface
+        || (p00.vertex[2] > 0.0
+            && p01.vertex[2] > 0.0
+            && p10.vertex[2] > 0.0
+            && p11.vertex[2] > 0.0);
+    if w.photometric_on && photometric_ok {
         let bilinear = |get: fn(&RefPixel) -> f32| {
             let top = get(p00) + (get(p01) - get(p00)) * fu;
             let bottom = get(p10) + (get(p11) - get(p10)) * fu;

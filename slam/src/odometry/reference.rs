@@ -45,6 +45,9 @@ pub(crate) struct ReferenceLevel {
     pub width: usize,
     pub height: usize,
     pub pixels: Vec<RefPixel>,
+    /// Intensity exists only where there is a surface (a raycast): the photometric term then
+    /// needs all four bilinear neighbours on the surface.
+    pub intensity_needs_surface: bool,
 }
 
 /// The reference a frame is tracked against, as a pyramid (level 0 is full resolution).
@@ -78,7 +81,7 @@ impl TrackingReference {
                     config.normal_radius_px,
                     config.normal_max_depth_jump_ratio as f32,
                 );
-                build_level(cam, vertices, normals, &pyramid.gray[level])
+                build_level(cam, vertices, normals, &pyramid.gray[level], false)
             })
             .collect();
         Ok(Self { levels })
@@ -113,16 +116,37 @@ impl TrackingReference {
         for level in 0..config.levels {
             let cam = camera.downsampled(level as u32);
             let vertices = vertex_map(&cam, &depth);
-            let facing = face_camera(&vertices, &normals);
+            // The model's normals where they agree (within 20°) with the normals of the raycast
+            // depth, else the depth's; none across silhouettes or at the region-of-interest cut
+            // (where a raycast can end on a spurious crossing), where the depth has no normal.
+            let from_depth = normals_from_vertices(
+                &vertices,
+                cam.width as usize,
+                cam.height as usize,
+                config.normal_radius_px,
+                config.normal_max_depth_jump_ratio as f32,
+            );
+            let facing: Vec<[f32; 3]> = face_camera(&vertices, &normals)
+                .into_iter()
+                .zip(from_depth)
+                .map(|(model, depth)| {
+                    // 0.94 ≈ cos 20°.
+                    if dot(model, depth) >= 0.94 {
+                        model
+                    } else {
+                        depth
+                    }
+                })
+                .collect();
             if level + 1 < config.levels {
                 let next_depth = downsample_depth(&depth);
                 normals = downsample_normals(&normals, depth.width() as usize, &next_depth);
                 let next_gray = downsample_gray(&gray);
-                levels.push(build_level(cam, vertices, facing, &gray));
+                levels.push(build_level(cam, vertices, facing, &gray, true));
                 depth = next_depth;
                 gray = next_gray;
             } else {
-                levels.push(build_level(cam, vertices, facing, &gray));
+                levels.push(build_level(cam, vertices, facing, &gray, true));
             }
         }
         Ok(Self { levels })
@@ -165,10 +189,31 @@ fn build_level(
     vertices: Vec<[f32; 3]>,
     normals: Vec<[f32; 3]>,
     gray: &GrayImage,
+    intensity_needs_surface: bool,
 ) -> ReferenceLevel {
     let (width, height) = (camera.width as usize, camera.height as usize);
     let intensity = gray.as_slice();
-    let (grad_u, grad_v) = gradients(intensity, width, height);
+    let (mut grad_u, mut grad_v) = gradients(intensity, width, height);
+    if intensity_needs_surface {
+        // A raycast has no intensity off the model: no gradient may reach across its border.
+        let has = |i: usize| vertices[i][2] > 0.0;
+        for v in 0..height {
+            for u in 0..width {
+                let i = v * width + u;
+                let inside = u > 0 && v > 0 && u + 1 < width && v + 1 < height;
+                if !(inside
+                    && has(i)
+                    && has(i - 1)
+                    && has(i + 1)
+                    && has(i - width)
+                    && has(i + width))
+                {
+                    grad_u[i] = 0.0;
+                    grad_v[i] = 0.0;
+                }
+            }
+        }
+    }
     let pixels = (0..vertices.len())
         .into_par_iter()
         .map(|i| RefPixel {
@@ -184,6 +229,7 @@ fn build_level(
         width,
         height,
         pixels,
+        intensity_needs_surface,
     }
 }
 
