@@ -6,4 +6,5 @@
 //! [`scarp_export`] and synthetic worlds in [`scarp_datasets`].
 
 pub mod cli;
+pub mod evaluation;
 pub mod fragility;

@@ -1,8 +1,10 @@
 //! # scarp-slam
 //!
 //! The geometry core and mapping engine of scarp: pinhole cameras, rigid transforms, RGBD frames,
-//! image pyramids, triangle meshes and point clouds. Later stages (odometry, TSDF fusion,
-//! marching cubes, features, bundle adjustment) build on these types.
+//! image pyramids, triangle meshes and point clouds; RGBD odometry ([`odometry`]) and keyframe
+//! selection ([`keyframes`]); voxel-hashed TSDF fusion and raycasting ([`tsdf`]) and
+//! marching-cubes meshing ([`meshing`]). Later stages (features, bundle adjustment) build on
+//! these.
 //!
 //! Conventions, which every public item follows:
 //! - World is local ENU (x east, y north, z up), in metres.
@@ -29,12 +31,19 @@
 //! assert!((pixel.x - camera.cx).abs() < 1e-9 && (pixel.y - camera.cy).abs() < 1e-9);
 //! ```
 
+// `!(x > 0.0)` is the NaN-rejecting form of `x <= 0.0`: bad input must fail the check.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 pub mod error;
 pub mod frame;
 pub mod geometry;
 pub mod image;
+pub mod keyframes;
 pub mod mesh;
+pub mod meshing;
+pub mod odometry;
 pub mod point_cloud;
+pub mod tsdf;
 
 pub use error::SlamError;
 pub use frame::RgbdFrame;

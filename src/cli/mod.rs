@@ -2,7 +2,10 @@
 //! `run` function.
 
 pub mod config;
+pub mod eval;
 pub mod fragility;
+pub mod map;
+pub mod odometry;
 pub mod render;
 pub mod simulate;
 pub mod world;
@@ -30,12 +33,19 @@ pub enum Command {
     Fragility(fragility::FragilityArgs),
     /// Run the simulated mission on a world (the main job).
     Simulate(simulate::SimulateArgs),
+    /// Evaluate outputs against the ground truth (`scarp eval mesh ...`, `scarp eval traj ...`).
+    Eval(eval::EvalArgs),
+    /// Track a sequence with RGBD odometry and write its trajectory.
+    Odometry(odometry::OdometryArgs),
     /// Render a camera path through a world into a TUM RGB-D sequence.
     Render(render::RenderArgs),
     /// Write a world's ground-truth meshes and `world.json`.
     World(world::WorldArgs),
     /// Print every tunable with its default, as TOML.
     Config(config::ConfigArgs),
+    /// Fuse an RGB-D sequence into a TSDF volume and mesh it (`mesh.ply`, `mesh.glb`,
+    /// `map.json`).
+    Map(map::MapArgs),
 }
 
 /// Runs a parsed command line.
@@ -47,9 +57,12 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Fragility(args) => fragility::run(args),
         Command::Simulate(args) => simulate::run(args),
+        Command::Eval(args) => eval::run(args),
+        Command::Odometry(args) => odometry::run(args),
         Command::Render(args) => render::run(args),
         Command::World(args) => world::run(args),
         Command::Config(args) => config::run(args),
+        Command::Map(args) => map::run(args),
     }
 }
 

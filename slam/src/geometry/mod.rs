@@ -3,6 +3,7 @@
 mod camera;
 mod polygon;
 mod transform;
+mod triangle;
 
 pub use camera::PinholeCamera;
 pub use polygon::{convex_hull_2d, polygon_signed_area};
@@ -10,3 +11,4 @@ pub use transform::{
     check_finite_isometry, isometry_from_tum, look_at, quaternion_from_xyzw, rotation_angle_deg,
     tum_from_isometry, yaw_pitch_roll_from_rotation,
 };
+pub use triangle::closest_point_on_triangle;

@@ -1,0 +1,153 @@
+//! `scarp map`: fuse a TUM RGB-D sequence into a TSDF volume and mesh it.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::Context;
+use clap::{Args, ValueEnum};
+use scarp_datasets::sequence::Sequence;
+use scarp_export::atomic::write_bytes_atomically;
+use scarp_export::glb::{GlbNode, GlbOptions, write_glb};
+use scarp_export::ply::{PlyEncoding, write_mesh};
+use scarp_slam::meshing::{MeshingConfig, extract_mesh};
+use scarp_slam::tsdf::{Roi, TsdfConfig, TsdfVolume};
+
+/// Which poses to fuse with.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum PoseSource {
+    /// `groundtruth.txt`.
+    Groundtruth,
+    /// `estimate.txt` (the state estimator's noisy poses).
+    Estimate,
+}
+
+/// Fuse a sequence into a mesh: writes `mesh.ply`, `mesh.glb` and `map.json`.
+#[derive(Debug, Args)]
+pub struct MapArgs {
+    /// The sequence directory (TUM RGB-D layout).
+    pub sequence: PathBuf,
+    /// Poses to fuse with.
+    #[arg(long, value_enum, default_value = "groundtruth")]
+    pub poses: PoseSource,
+    /// Voxel size in metres.
+    #[arg(long, default_value_t = 0.01)]
+    pub voxel: f32,
+    /// Region of interest: `cyl:x,y,z_min,z_max,r` or `box:x0,y0,z0,x1,y1,z1` (metres).
+    #[arg(long)]
+    pub roi: Option<Roi>,
+    /// Ignore depth beyond this, metres.
+    #[arg(long)]
+    pub max_depth: Option<f32>,
+    /// Drop mesh components with fewer triangles.
+    #[arg(long, default_value_t = 200)]
+    pub min_component_triangles: usize,
+    /// Mesh only voxels whose weight exceeds this.
+    #[arg(long, default_value_t = 0.0)]
+    pub min_weight: f32,
+    /// Output directory.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Print `map.json` on stdout too.
+    #[arg(long)]
+    pub json: bool,
+}
+
+fn percentile(sorted: &[f64], p: f64) -> f64 {
+    crate::evaluation::mesh::percentile_sorted(sorted, p)
+}
+
+/// Runs `scarp map`.
+///
+/// # Errors
+/// Sequence, pose, integration and writing errors naming the file or frame.
+pub fn run(args: MapArgs) -> anyhow::Result<()> {
+    let seq = Sequence::open(&args.sequence)
+        .with_context(|| format!("opening sequence {}", args.sequence.display()))?;
+    anyhow::ensure!(!seq.is_empty(), "{}: no frames", args.sequence.display());
+    let mut config = TsdfConfig {
+        voxel_size_m: args.voxel,
+        roi: args.roi,
+        ..TsdfConfig::default()
+    };
+    if let Some(m) = args.max_depth {
+        config.max_depth_m = m;
+    }
+    let mut volume = TsdfVolume::new(config)?;
+    let bar = super::progress_bar(seq.len() as u64, "fusing");
+    let mut integrate_ms = Vec::with_capacity(seq.len());
+    for (i, entry) in seq.entries.iter().enumerate() {
+        let pose = match args.poses {
+            PoseSource::Groundtruth => entry.world_from_camera_truth,
+            PoseSource::Estimate => entry.world_from_camera_estimate,
+        }
+        .with_context(|| {
+            format!(
+                "{}: frame {i} has no {:?} pose",
+                args.sequence.display(),
+                args.poses
+            )
+        })?;
+        let frame = seq
+            .load_frame(i)
+            .with_context(|| format!("{}: loading frame {i}", args.sequence.display()))?;
+        let start = Instant::now();
+        volume
+            .integrate(&frame, &seq.camera, &pose)
+            .with_context(|| format!("integrating frame {i}"))?;
+        integrate_ms.push(start.elapsed().as_secs_f64() * 1e3);
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    let start = Instant::now();
+    let mesh = extract_mesh(
+        &volume,
+        &MeshingConfig {
+            min_weight: args.min_weight,
+            min_component_triangles: args.min_component_triangles,
+        },
+    );
+    let mesh_ms = start.elapsed().as_secs_f64() * 1e3;
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating {}", args.out.display()))?;
+    write_mesh(
+        args.out.join("mesh.ply"),
+        &mesh,
+        PlyEncoding::BinaryLittleEndian,
+    )?;
+    write_glb(
+        args.out.join("mesh.glb"),
+        &[GlbNode::new("map", &mesh)],
+        &GlbOptions::default(),
+    )?;
+    let stats = volume.stats();
+    integrate_ms.sort_by(f64::total_cmp);
+    let json = serde_json::json!({
+        "frames": seq.len(),
+        "poses": format!("{:?}", args.poses).to_lowercase(),
+        "voxel_size_m": args.voxel,
+        "roi": args.roi,
+        "blocks": stats.blocks,
+        "voxels": stats.voxels,
+        "observed_voxels": stats.observed_voxels,
+        "memory_bytes": stats.memory_bytes,
+        "integrate_ms_median": percentile(&integrate_ms, 0.5),
+        "integrate_ms_p90": percentile(&integrate_ms, 0.9),
+        "mesh_ms": mesh_ms,
+        "vertices": mesh.vertex_count(),
+        "triangles": mesh.face_count(),
+    });
+    let text = serde_json::to_string_pretty(&json)?;
+    write_bytes_atomically(args.out.join("map.json"), text.as_bytes())?;
+    if args.json {
+        println!("{text}");
+    } else {
+        eprintln!(
+            "fused {} frames into {} blocks; mesh {} triangles; wrote {}",
+            seq.len(),
+            stats.blocks,
+            mesh.face_count(),
+            args.out.display()
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,521 @@
+//! Mesh accuracy and completeness, and precision / recall / F-score at τ (Knapitsch et al.
+//! 2017, *Tanks and Temples*).
+//!
+//! Both surfaces are sampled densely and area-weighted with a seeded RNG. The distance from a
+//! sample to the other mesh is the exact point-to-triangle distance to the nearest of the
+//! candidate triangles found with a kiddo k-d tree over that mesh's own samples, vertices and
+//! centroids. All lengths are metres in the meshes' common frame (world ENU).
+//!
+//! - accuracy: distances from reconstruction samples to the ground truth;
+//! - completeness: distances from ground-truth samples to the reconstruction;
+//! - precision: the fraction of accuracy distances ≤ τ; recall: the fraction of completeness
+//!   distances ≤ τ; F-score: their harmonic mean.
+
+use std::num::NonZero;
+
+use kiddo::{ImmutableKdTree, SquaredEuclidean};
+use nalgebra::{Isometry3, Point3};
+use rand::rngs::Xoshiro256PlusPlus;
+use rand::{RngExt, SeedableRng};
+use rayon::prelude::*;
+use scarp_datasets::render::Renderer;
+use scarp_datasets::world::World;
+use scarp_slam::geometry::closest_point_on_triangle;
+use scarp_slam::{PinholeCamera, TriangleMesh};
+use serde::{Deserialize, Serialize};
+use thiserror::Error;
+
+/// Mesh-evaluation parameters.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct MeshEvalConfig {
+    /// Precision/recall threshold τ, metres. Default 0.01 (1 cm, the mapping voxel size).
+    pub tau_m: f64,
+    /// Surface samples per square metre on each mesh. Default 40 000 (5 mm apart).
+    pub samples_per_m2: f64,
+    /// Cap on the samples of one mesh. Default 2 000 000.
+    pub max_samples: usize,
+    /// Candidate triangles examined per distance query. Default 16.
+    pub neighbours: usize,
+    /// Ignore reconstruction triangles whose centroid lies farther than this from the
+    /// ground-truth bounding box, metres. Default none (keep everything).
+    pub crop_to_gt_m: Option<f64>,
+    /// Seed of the surface sampling. Default 0.
+    pub seed: u64,
+}
+
+impl Default for MeshEvalConfig {
+    fn default() -> Self {
+        Self {
+            tau_m: 0.01,
+            samples_per_m2: 40_000.0,
+            max_samples: 2_000_000,
+            neighbours: 16,
+            crop_to_gt_m: None,
+            seed: 0,
+        }
+    }
+}
+
+/// An error of the mesh evaluation.
+#[derive(Debug, Error)]
+pub enum MeshEvalError {
+    /// A configuration field is out of range.
+    #[error("invalid evaluation setting `{field}` = {value}: {reason}")]
+    InvalidConfig {
+        /// The field.
+        field: &'static str,
+        /// Its value.
+        value: f64,
+        /// Why it was rejected.
+        reason: &'static str,
+    },
+    /// A mesh has no area (after cropping) to sample.
+    #[error("the {which} mesh has no triangles of positive area{hint}")]
+    EmptyMesh {
+        /// `reconstruction` or `ground truth`.
+        which: &'static str,
+        /// Extra context (for example cropping).
+        hint: &'static str,
+    },
+    /// Rendering for the visibility test failed.
+    #[error("visibility rendering: {0}")]
+    Render(#[from] scarp_datasets::DatasetError),
+}
+
+/// The scores. Field names are the `scarp eval mesh --json` keys.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MeshEvaluation {
+    /// Mean distance from the reconstruction to the ground truth, metres.
+    pub accuracy_mean_m: f64,
+    /// Median of those distances, metres.
+    pub accuracy_median_m: f64,
+    /// 90th percentile of those distances, metres.
+    pub accuracy_p90_m: f64,
+    /// Mean distance from the ground truth to the reconstruction, metres.
+    pub completeness_mean_m: f64,
+    /// Median of those distances, metres.
+    pub completeness_median_m: f64,
+    /// 90th percentile of those distances, metres.
+    pub completeness_p90_m: f64,
+    /// Fraction of reconstruction samples within τ of the ground truth.
+    pub precision: f64,
+    /// Fraction of (visible) ground-truth samples within τ of the reconstruction.
+    pub recall: f64,
+    /// Harmonic mean of precision and recall (0 when both are 0).
+    pub fscore: f64,
+    /// The threshold τ, metres.
+    pub tau_m: f64,
+    /// Reconstruction samples scored.
+    pub reconstruction_samples: usize,
+    /// Ground-truth samples scored (visible ones only with a visibility test).
+    pub ground_truth_samples: usize,
+    /// Fraction of ground-truth samples that passed the visibility test (1 without one).
+    pub gt_visible_fraction: f64,
+}
+
+/// Percentile `p` ∈ [0, 1] of sorted values by linear interpolation between order statistics
+/// (rank p·(n − 1), as NumPy's default). NaN for an empty slice.
+pub fn percentile_sorted(sorted: &[f64], p: f64) -> f64 {
+    if sorted.is_empty() {
+        return f64::NAN;
+    }
+    let rank = p.clamp(0.0, 1.0) * (sorted.len() - 1) as f64;
+    let lo = rank.floor() as usize;
+    let hi = rank.ceil() as usize;
+    sorted[lo] + (sorted[hi] - sorted[lo]) * (rank - lo as f64)
+}
+
+/// Scores given distance sets: `accuracy` from reconstruction samples to the ground truth,
+/// `completeness` from ground-truth samples to the reconstruction.
+pub fn score_distances(accuracy: &[f64], completeness: &[f64], tau_m: f64) -> MeshEvaluation {
+    let stats = |d: &[f64]| {
+        let mut s = d.to_vec();
+        s.sort_by(f64::total_cmp);
+        let mean = s.iter().sum::<f64>() / s.len().max(1) as f64;
+        let within = s.iter().filter(|&&v| v <= tau_m).count() as f64 / s.len().max(1) as f64;
+        (
+            mean,
+            percentile_sorted(&s, 0.5),
+            percentile_sorted(&s, 0.9),
+            within,
+        )
+    };
+    let (am, amed, ap90, precision) = stats(accuracy);
+    let (cm, cmed, cp90, recall) = stats(completeness);
+    let fscore = if precision + recall > 0.0 {
+        2.0 * precision * recall / (precision + recall)
+    } else {
+        0.0
+    };
+    MeshEvaluation {
+        accuracy_mean_m: am,
+        accuracy_median_m: amed,
+        accuracy_p90_m: ap90,
+        completeness_mean_m: cm,
+        completeness_median_m: cmed,
+        completeness_p90_m: cp90,
+        precision,
+        recall,
+        fscore,
+        tau_m,
+        reconstruction_samples: accuracy.len(),
+        ground_truth_samples: completeness.len(),
+        gt_visible_fraction: 1.0,
+    }
+}
+
+/// `count` points on `mesh`, area-weighted, uniform within each triangle, each with its face.
+pub fn sample_surface(
+    mesh: &TriangleMesh,
+    count: usize,
+    rng: &mut Xoshiro256PlusPlus,
+) -> Vec<(Point3<f64>, u32)> {
+    let mut cumulative = Vec::with_capacity(mesh.face_count());
+    let mut total = 0.0;
+    for f in 0..mesh.face_count() {
+        let [a, b, c] = mesh.triangle(f);
+        total += 0.5 * (b - a).cross(&(c - a)).norm();
+        cumulative.push(total);
+    }
+    if total <= 0.0 {
+        return Vec::new();
+    }
+    (0..count)
+        .map(|_| {
+            let r = rng.random::<f64>() * total;
+            let f = cumulative
+                .partition_point(|&c| c < r)
+                .min(mesh.face_count() - 1);
+            let [a, b, c] = mesh.triangle(f);
+            let (mut u, mut v) = (rng.random::<f64>(), rng.random::<f64>());
+            if u + v > 1.0 {
+                u = 1.0 - u;
+                v = 1.0 - v;
+            }
+            (a + (b - a) * u + (c - a) * v, f as u32)
+        })
+        .collect()
+}
+
+/// Exact distances from points to a mesh, through a k-d tree of the mesh's samples.
+pub struct MeshDistance<'a> {
+    mesh: &'a TriangleMesh,
+    tree: ImmutableKdTree<f64, 3>,
+    faces: Vec<u32>,
+    neighbours: NonZero<usize>,
+}
+
+impl<'a> MeshDistance<'a> {
+    /// Indexes `mesh` with its vertices, face centroids and `samples` (with their faces).
+    ///
+    /// # Errors
+    /// [`MeshEvalError::EmptyMesh`] when the mesh has no faces.
+    pub fn new(
+        mesh: &'a TriangleMesh,
+        samples: &[(Point3<f64>, u32)],
+        neighbours: usize,
+        which: &'static str,
+    ) -> Result<Self, MeshEvalError> {
+        let mut points: Vec<[f64; 3]> = Vec::new();
+        let mut faces = Vec::new();
+        for f in 0..mesh.face_count() {
+            let [a, b, c] = mesh.triangle(f);
+            let centroid = (a.coords + b.coords + c.coords) / 3.0;
+            points.push([centroid.x, centroid.y, centroid.z]);
+            faces.push(f as u32);
+            for p in [a, b, c] {
+                points.push([p.x, p.y, p.z]);
+                faces.push(f as u32);
+            }
+        }
+        for (p, f) in samples {
+            points.push([p.x, p.y, p.z]);
+            faces.push(*f);
+        }
+        let empty = MeshEvalError::EmptyMesh { which, hint: "" };
+        if points.is_empty() {
+            return Err(empty);
+        }
+        let tree = ImmutableKdTree::new_from_slice(&points).map_err(|_| empty)?;
+        Ok(Self {
+            mesh,
+            tree,
+            faces,
+            neighbours: NonZero::new(neighbours.max(1)).unwrap_or(NonZero::<usize>::MIN),
+        })
+    }
+
+    /// Distance from `p` to the nearest candidate triangle, metres.
+    pub fn distance(&self, p: &Point3<f64>) -> f64 {
+        let found = self
+            .tree
+            .query(&[p.x, p.y, p.z])
+            .nearest_n::<SquaredEuclidean<f64>>(self.neighbours)
+            .execute();
+        let mut best = f64::INFINITY;
+        let mut seen: Vec<u32> = Vec::with_capacity(found.len());
+        for r in found {
+            let f = self.faces[r.item as usize];
+            if seen.contains(&f) {
+                continue;
+            }
+            seen.push(f);
+            let [a, b, c] = self.mesh.triangle(f as usize);
+            best = best.min((closest_point_on_triangle(p, &a, &b, &c) - p).norm());
+        }
+        best
+    }
+}
+
+/// The reconstruction's faces whose centroid lies within `margin_m` of the axis-aligned box
+/// of `gt`.
+pub fn crop_to_box(mesh: &TriangleMesh, gt: &TriangleMesh, margin_m: f64) -> TriangleMesh {
+    let Some((lo, hi)) = gt.bounds() else {
+        return TriangleMesh::default();
+    };
+    let lo = lo.cast::<f64>().map(|v| v - margin_m);
+    let hi = hi.cast::<f64>().map(|v| v + margin_m);
+    let mut cropped = mesh.clone();
+    cropped.faces.retain(|f| {
+        let c = f
+            .iter()
+            .map(|&v| mesh.positions[v as usize].cast::<f64>().coords)
+            .sum::<nalgebra::Vector3<f64>>()
+            / 3.0;
+        (0..3).all(|a| c[a] >= lo[a] && c[a] <= hi[a])
+    });
+    scarp_slam::meshing::remove_small_components(&cropped, 0)
+}
+
+fn sample_count(mesh: &TriangleMesh, config: &MeshEvalConfig) -> usize {
+    ((mesh.surface_area() * config.samples_per_m2).ceil() as usize).clamp(1, config.max_samples)
+}
+
+/// A visibility test for ground-truth samples: a point counts when at least one camera sees
+/// it unoccluded.
+pub struct Visibility<'w> {
+    /// The whole world (rocks, pedestals, terrain) as occluders.
+    pub world: &'w World,
+    /// The camera of the sequence.
+    pub camera: PinholeCamera,
+    /// Ground-truth `world_from_camera` of each frame.
+    pub world_from_camera: Vec<Isometry3<f64>>,
+    /// A point is visible when its z-depth is within this of the rendered depth at one of the
+    /// four pixels around its projection, metres. Default in the CLI: 0.01.
+    pub tolerance_m: f64,
+}
+
+impl Visibility<'_> {
+    /// Which of `points` are visible from at least one camera (z-buffer test against renders
+    /// of the whole world).
+    ///
+    /// # Errors
+    /// [`MeshEvalError::Render`] for a bad camera or pose.
+    pub fn visible(&self, points: &[Point3<f64>]) -> Result<Vec<bool>, MeshEvalError> {
+        let renderer = Renderer::new(self.world);
+        let mut visible = vec![false; points.len()];
+        let (w, h) = (self.camera.width as i64, self.camera.height as i64);
+        for pose in &self.world_from_camera {
+            let depth = renderer.render(&self.camera, pose)?.depth_m;
+            let camera_from_world = pose.inverse();
+            visible.par_iter_mut().zip(points).for_each(|(vis, p)| {
+                if *vis {
+                    return;
+                }
+                let q = camera_from_world * p;
+                let Some(px) = self.camera.project(&q) else {
+                    return;
+                };
+                let (u0, v0) = (px.x.floor() as i64, px.y.floor() as i64);
+                for (du, dv) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                    let (u, v) = (u0 + du, v0 + dv);
+                    if u < 0 || v < 0 || u >= w || v >= h {
+                        continue;
+                    }
+                    // In range by the check above.
+                    let d = f64::from(*depth.get(u as u32, v as u32).unwrap_or(&0.0));
+                    if d > 0.0 && (q.z - d).abs() <= self.tolerance_m {
+                        *vis = true;
+                        return;
+                    }
+                }
+            });
+        }
+        Ok(visible)
+    }
+}
+
+/// Scores `reconstruction` against `ground_truth`, optionally counting only the ground-truth
+/// samples that `visibility` finds visible.
+///
+/// # Errors
+/// [`MeshEvalError::InvalidConfig`] for a bad τ or density; [`MeshEvalError::EmptyMesh`] when a
+/// mesh (after cropping) has nothing to sample; [`MeshEvalError::Render`] from the visibility
+/// test.
+pub fn evaluate_mesh(
+    reconstruction: &TriangleMesh,
+    ground_truth: &TriangleMesh,
+    config: &MeshEvalConfig,
+    visibility: Option<&Visibility<'_>>,
+) -> Result<MeshEvaluation, MeshEvalError> {
+    let bad = |field, value, reason| MeshEvalError::InvalidConfig {
+        field,
+        value,
+        reason,
+    };
+    if !(config.tau_m.is_finite() && config.tau_m > 0.0) {
+        return Err(bad("tau_m", config.tau_m, "must be positive"));
+    }
+    if !(config.samples_per_m2.is_finite() && config.samples_per_m2 > 0.0) {
+        return Err(bad(
+            "samples_per_m2",
+            config.samples_per_m2,
+            "must be positive",
+        ));
+    }
+    if let Some(m) = config.crop_to_gt_m
+        && !(m.is_finite() && m >= 0.0)
+    {
+        return Err(bad("crop_to_gt_m", m, "must be ≥ 0"));
+    }
+    let cropped;
+    let recon = match config.crop_to_gt_m {
+        Some(m) => {
+            cropped = crop_to_box(reconstruction, ground_truth, m);
+            &cropped
+        }
+        None => reconstruction,
+    };
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(config.seed);
+    let recon_samples = sample_surface(recon, sample_count(recon, config), &mut rng);
+    if recon_samples.is_empty() {
+        return Err(MeshEvalError::EmptyMesh {
+            which: "reconstruction",
+            hint: if config.crop_to_gt_m.is_some() {
+                " inside the crop box"
+            } else {
+                ""
+            },
+        });
+    }
+    let gt_samples = sample_surface(ground_truth, sample_count(ground_truth, config), &mut rng);
+    if gt_samples.is_empty() {
+        return Err(MeshEvalError::EmptyMesh {
+            which: "ground truth",
+            hint: "",
+        });
+    }
+    let gt_index = MeshDistance::new(ground_truth, &gt_samples, config.neighbours, "ground truth")?;
+    let recon_index =
+        MeshDistance::new(recon, &recon_samples, config.neighbours, "reconstruction")?;
+    let accuracy: Vec<f64> = recon_samples
+        .par_iter()
+        .map(|(p, _)| gt_index.distance(p))
+        .collect();
+    let gt_points: Vec<Point3<f64>> = gt_samples.iter().map(|(p, _)| *p).collect();
+    let (kept, fraction) = match visibility {
+        Some(v) => {
+            let mask = v.visible(&gt_points)?;
+            let kept: Vec<Point3<f64>> = gt_points
+                .iter()
+                .zip(&mask)
+                .filter(|(_, m)| **m)
+                .map(|(p, _)| *p)
+                .collect();
+            let fraction = kept.len() as f64 / gt_points.len() as f64;
+            (kept, fraction)
+        }
+        None => (gt_points, 1.0),
+    };
+    let completeness: Vec<f64> = kept.par_iter().map(|p| recon_index.distance(p)).collect();
+    let mut out = score_distances(&accuracy, &completeness, config.tau_m);
+    out.gt_visible_fraction = fraction;
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn square(z: f32, size: f32) -> TriangleMesh {
+        TriangleMesh::new(
+            vec![
+                Point3::new(0.0, 0.0, z),
+                Point3::new(size, 0.0, z),
+                Point3::new(size, size, z),
+                Point3::new(0.0, size, z),
+            ],
+            vec![[0, 1, 2], [0, 2, 3]],
+        )
+        .unwrap()
+    }
+
+    #[test]
+    fn hand_computed_scores() {
+        let e = score_distances(&[0.0, 0.005, 0.02, 0.03], &[0.001, 0.002, 0.05], 0.01);
+        assert!((e.accuracy_mean_m - 0.01375).abs() < 1e-12);
+        assert!((e.accuracy_median_m - 0.0125).abs() < 1e-12);
+        // rank 0.9·3 = 2.7: 0.02 + 0.7·0.01.
+        assert!((e.accuracy_p90_m - 0.027).abs() < 1e-12);
+        assert!((e.completeness_median_m - 0.002).abs() < 1e-12);
+        assert!((e.completeness_p90_m - (0.002 + 0.8 * 0.048)).abs() < 1e-12);
+        assert_eq!(e.precision, 0.5);
+        assert!((e.recall - 2.0 / 3.0).abs() < 1e-12);
+        assert!((e.fscore - 4.0 / 7.0).abs() < 1e-12);
+        let zero = score_distances(&[1.0], &[1.0], 0.01);
+        assert_eq!(zero.fscore, 0.0);
+    }
+
+    #[test]
+    fn offset_squares() {
+        // Two 1 m squares 3 mm apart: every distance is 3 mm.
+        let gt = square(0.0, 1.0);
+        let recon = square(0.003, 1.0);
+        let config = MeshEvalConfig {
+            samples_per_m2: 2000.0,
+            ..MeshEvalConfig::default()
+        };
+        let e = evaluate_mesh(&recon, &gt, &config, None).unwrap();
+        for v in [
+            e.accuracy_mean_m,
+            e.accuracy_median_m,
+            e.accuracy_p90_m,
+            e.completeness_mean_m,
+            e.completeness_p90_m,
+        ] {
+            assert!((v - 0.003).abs() < 1e-6, "{v}");
+        }
+        assert_eq!(e.fscore, 1.0);
+        let strict = MeshEvalConfig {
+            tau_m: 0.002,
+            ..config.clone()
+        };
+        assert_eq!(
+            evaluate_mesh(&recon, &gt, &strict, None).unwrap().fscore,
+            0.0
+        );
+        // Half the ground truth missing from the reconstruction: recall ½, precision 1.
+        let half = square(0.0, 1.0);
+        let mut big = square(0.0, 2.0);
+        big.positions[2] = Point3::new(2.0, 1.0, 0.0);
+        big.positions[3] = Point3::new(0.0, 1.0, 0.0);
+        let e = evaluate_mesh(&half, &big, &config, None).unwrap();
+        assert_eq!(e.precision, 1.0);
+        assert!((e.recall - 0.5).abs() < 0.03, "{}", e.recall);
+        // Cropping removes the far part of a reconstruction.
+        let mut far = square(0.0, 1.0);
+        far.append(&square(5.0, 1.0));
+        let cropped = MeshEvalConfig {
+            crop_to_gt_m: Some(0.1),
+            ..config.clone()
+        };
+        assert_eq!(
+            evaluate_mesh(&far, &gt, &cropped, None).unwrap().precision,
+            1.0
+        );
+        let e = evaluate_mesh(&far, &gt, &config, None).unwrap();
+        assert!((e.precision - 0.5).abs() < 0.03);
+        assert!(evaluate_mesh(&square(9.0, 1.0), &gt, &cropped, None).is_err());
+    }
+}

@@ -1,0 +1,8 @@
+//! The user's yardsticks: how good a reconstruction is against the ground truth.
+//!
+//! [`mesh`] scores a reconstructed mesh against a ground-truth mesh (accuracy, completeness,
+//! precision, recall and F-score at τ, as Tanks and Temples defines them). [`trajectory`] scores
+//! an estimated trajectory (ATE and RPE, as the TUM RGB-D benchmark tools define them).
+
+pub mod mesh;
+pub mod trajectory;

@@ -1,0 +1,131 @@
+//! End-to-end `scarp map` and `scarp eval mesh` on a short no-noise orbit of the default world:
+//! the cylinder ROI keeps memory under 10 % of the unrestricted map, and the target's mesh
+//! scores well against its ground truth (reduced version of the 120-frame figure).
+
+use std::path::Path;
+use std::process::Command;
+
+fn scarp(args: &[&str]) -> String {
+    let out = Command::new(env!("CARGO_BIN_EXE_scarp"))
+        .args(args)
+        .output()
+        .expect("runs scarp");
+    assert!(
+        out.status.success(),
+        "scarp {args:?} failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout).expect("utf-8")
+}
+
+fn json(path: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).expect("reads")).expect("json")
+}
+
+#[test]
+fn map_and_evaluate_default_orbit() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = |name: &str| dir.path().join(name).to_string_lossy().into_owned();
+    scarp(&[
+        "render",
+        "--path",
+        "orbit",
+        "--frames",
+        "8",
+        "--no-noise",
+        "--out",
+        &d("seq"),
+    ]);
+    scarp(&["world", "--out", &d("world")]);
+    let world = json(&dir.path().join("world/world.json"));
+    let c = &world["rocks"][0]["centroid"];
+    let (x, y, z) = (
+        c[0].as_f64().unwrap(),
+        c[1].as_f64().unwrap(),
+        c[2].as_f64().unwrap(),
+    );
+    let roi = format!("cyl:{x},{y},{},{},1.2", z - 1.6, z + 1.2);
+    scarp(&[
+        "map",
+        &d("seq"),
+        "--poses",
+        "groundtruth",
+        "--voxel",
+        "0.01",
+        "--roi",
+        &roi,
+        "--out",
+        &d("roi"),
+    ]);
+    scarp(&[
+        "map",
+        &d("seq"),
+        "--poses",
+        "groundtruth",
+        "--voxel",
+        "0.01",
+        "--out",
+        &d("full"),
+    ]);
+    let roi_map = json(&dir.path().join("roi/map.json"));
+    let full_map = json(&dir.path().join("full/map.json"));
+    for key in [
+        "frames",
+        "blocks",
+        "voxels",
+        "memory_bytes",
+        "integrate_ms_median",
+        "integrate_ms_p90",
+        "mesh_ms",
+        "vertices",
+        "triangles",
+    ] {
+        assert!(roi_map.get(key).is_some(), "map.json lacks {key}");
+    }
+    assert_eq!(roi_map["frames"], 8);
+    let (b_roi, b_full) = (
+        roi_map["blocks"].as_f64().unwrap(),
+        full_map["blocks"].as_f64().unwrap(),
+    );
+    assert!(b_roi < 0.1 * b_full, "ROI blocks {b_roi} vs {b_full}");
+    assert!(dir.path().join("roi/mesh.glb").exists());
+    let scores: serde_json::Value = serde_json::from_str(&scarp(&[
+        "eval",
+        "mesh",
+        "--gt",
+        &d("world/rock_1.ply"),
+        "--mesh",
+        &d("roi/mesh.ply"),
+        "--tau",
+        "0.01",
+        "--crop-to-gt",
+        "0.1",
+        "--visible-from",
+        &d("seq"),
+        "--world",
+        "default",
+        "--samples-per-m2",
+        "10000",
+        "--json",
+    ]))
+    .expect("json");
+    for key in [
+        "accuracy_mean_m",
+        "accuracy_median_m",
+        "accuracy_p90_m",
+        "completeness_mean_m",
+        "completeness_median_m",
+        "completeness_p90_m",
+        "precision",
+        "recall",
+        "fscore",
+        "tau_m",
+        "gt_visible_fraction",
+    ] {
+        assert!(scores.get(key).is_some(), "eval json lacks {key}");
+    }
+    let f = scores["fscore"].as_f64().unwrap();
+    assert!(f >= 0.9, "F-score {f}: {scores}");
+    let visible = scores["gt_visible_fraction"].as_f64().unwrap();
+    assert!(visible > 0.5 && visible < 1.0, "visible fraction {visible}");
+}
