@@ -58,11 +58,15 @@ pub(super) fn integrate(
     };
     camera.validate().map_err(geometry)?;
     check_finite_isometry(world_from_camera, "world_from_camera").map_err(geometry)?;
-    if frame.width() != camera.width || frame.height() != camera.height {
+    let depth_size = (frame.depth_m.width(), frame.depth_m.height());
+    if frame.width() != camera.width
+        || frame.height() != camera.height
+        || depth_size != (camera.width, camera.height)
+    {
         return Err(TsdfError::FrameSize {
             frame: frame_index,
-            width: frame.width(),
-            height: frame.height(),
+            width: depth_size.0.min(frame.width()),
+            height: depth_size.1.min(frame.height()),
             camera_width: camera.width,
             camera_height: camera.height,
         });

@@ -505,6 +505,12 @@ fn rejects_bad_input() {
         volume.integrate(&frame, &small, &Isometry3::identity()),
         Err(TsdfError::FrameSize { .. })
     ));
+    let mut short_depth = frame.clone();
+    short_depth.depth_m = DepthImage::filled(10, 10, 1.0);
+    assert!(matches!(
+        volume.integrate(&short_depth, &camera(), &Isometry3::identity()),
+        Err(TsdfError::FrameSize { .. })
+    ));
     let mut bad = Isometry3::identity();
     bad.translation.vector.x = f64::NAN;
     assert!(volume.integrate(&frame, &camera(), &bad).is_err());
