@@ -137,7 +137,8 @@ pub fn run(args: MapArgs) -> anyhow::Result<()> {
     let json = serde_json::json!({
         "frames": seq.len(),
         "poses": format!("{:?}", args.poses).to_lowercase(),
-        "voxel_size_m": args.voxel,
+        // The f32 argument printed as the decimal the user typed (0.01, not 0.00999999977).
+        "voxel_size_m": args.voxel.to_string().parse::<f64>().unwrap_or(f64::from(args.voxel)),
         "roi": args.roi,
         "blocks": stats.blocks,
         "voxels": stats.voxels,
