@@ -78,6 +78,14 @@ pub enum MeshEvalError {
         /// Extra context (for example cropping).
         hint: &'static str,
     },
+    /// A mesh is malformed (face index out of range, attribute length).
+    #[error("the {which} mesh is invalid: {source}")]
+    InvalidMesh {
+        /// `reconstruction` or `ground truth`.
+        which: &'static str,
+        /// What is wrong.
+        source: scarp_slam::SlamError,
+    },
     /// Rendering for the visibility test failed.
     #[error("visibility rendering: {0}")]
     Render(#[from] scarp_datasets::DatasetError),
@@ -379,6 +387,18 @@ pub fn evaluate_mesh(
     {
         return Err(bad("crop_to_gt_m", m, "must be ≥ 0"));
     }
+    reconstruction
+        .validate()
+        .map_err(|source| MeshEvalError::InvalidMesh {
+            which: "reconstruction",
+            source,
+        })?;
+    ground_truth
+        .validate()
+        .map_err(|source| MeshEvalError::InvalidMesh {
+            which: "ground truth",
+            source,
+        })?;
     let cropped;
     let recon = match config.crop_to_gt_m {
         Some(m) => {
@@ -517,5 +537,11 @@ mod tests {
         let e = evaluate_mesh(&far, &gt, &config, None).unwrap();
         assert!((e.precision - 0.5).abs() < 0.03);
         assert!(evaluate_mesh(&square(9.0, 1.0), &gt, &cropped, None).is_err());
+        let mut broken = square(0.0, 1.0);
+        broken.faces.push([0, 1, 7]);
+        assert!(matches!(
+            evaluate_mesh(&broken, &gt, &config, None),
+            Err(MeshEvalError::InvalidMesh { .. })
+        ));
     }
 }

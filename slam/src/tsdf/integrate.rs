@@ -58,11 +58,15 @@ pub(super) fn integrate(
     };
     camera.validate().map_err(geometry)?;
     check_finite_isometry(world_from_camera, "world_from_camera").map_err(geometry)?;
-    if frame.width() != camera.width || frame.height() != camera.height {
+    let depth_size = (frame.depth_m.width(), frame.depth_m.height());
+    if frame.width() != camera.width
+        || frame.height() != camera.height
+        || depth_size != (camera.width, camera.height)
+    {
         return Err(TsdfError::FrameSize {
             frame: frame_index,
-            width: frame.width(),
-            height: frame.height(),
+            width: depth_size.0.min(frame.width()),
+            height: depth_size.1.min(frame.height()),
             camera_width: camera.width,
             camera_height: camera.height,
         });
@@ -113,10 +117,7 @@ fn touched_blocks(
     let truncation = config.truncation_m();
     let inv_block = 1.0 / config.block_size_m();
     let half_voxel = 0.5 * config.voxel_size_m;
-    // Samples along the band no farther apart than two voxels, so a ray cannot skip a block.
-    let steps = ((2.0 * truncation) / (2.0 * config.voxel_size_m))
-        .ceil()
-        .max(1.0) as usize;
+    let block_size_f64 = f64::from(config.block_size_m());
     let transform = RigidF32::from_isometry(world_from_camera);
     let (fx, fy, cx, cy) = (
         camera.fx as f32,
@@ -131,7 +132,9 @@ fn touched_blocks(
         .into_par_iter()
         .map(|chunk| {
             let mut set = HashSet::with_hasher(BuildBlockHasher::default());
-            let mut last = [i32::MIN; 3];
+            // The last few blocks inserted: neighbouring pixels mostly touch the same blocks.
+            let mut recent = [[i32::MIN; 3]; 8];
+            let mut slot = 0;
             for v in chunk * ALLOCATION_ROWS..((chunk + 1) * ALLOCATION_ROWS).min(height) {
                 for u in 0..width {
                     let d = data[v * width + u];
@@ -139,21 +142,28 @@ fn touched_blocks(
                         continue;
                     }
                     let ray = Vector3::new((u as f32 - cx) / fx, (v as f32 - cy) / fy, 1.0);
-                    for s in 0..=steps {
-                        let z = d - truncation + 2.0 * truncation * s as f32 / steps as f32;
-                        let p = transform.apply(&(ray * z));
-                        // Voxel centres sit at integer multiples of the voxel size, so a block
-                        // covers [8·b − ½, 8·b + 7½) voxels.
-                        let b = [
-                            ((p.x + half_voxel) * inv_block).floor() as i32,
-                            ((p.y + half_voxel) * inv_block).floor() as i32,
-                            ((p.z + half_voxel) * inv_block).floor() as i32,
-                        ];
-                        if b != last {
-                            set.insert(b);
-                            last = b;
+                    let near = transform.apply(&(ray * (d - truncation)));
+                    let far = transform.apply(&(ray * (d + truncation)));
+                    if let Some(roi) = &config.roi {
+                        // Conservative pre-test (one block of margin); blocks are tested exactly
+                        // below.
+                        let lo = [0, 1, 2].map(|a| f64::from(near[a].min(far[a])) - block_size_f64);
+                        let hi = [0, 1, 2].map(|a| f64::from(near[a].max(far[a])) + block_size_f64);
+                        if !roi.intersects_box(lo, hi) {
+                            continue;
                         }
                     }
+                    // Voxel centres sit at integer multiples of the voxel size, so block b
+                    // covers [8·b − ½, 8·b + 7½) voxels.
+                    let a = (near.add_scalar(half_voxel)) * inv_block;
+                    let b = (far.add_scalar(half_voxel)) * inv_block;
+                    walk_blocks(&a, &b, |block| {
+                        if !recent.contains(&block) {
+                            recent[slot] = block;
+                            slot = (slot + 1) % recent.len();
+                            set.insert(block);
+                        }
+                    });
                 }
             }
             set
@@ -179,6 +189,47 @@ fn touched_blocks(
         .collect();
     out.sort_unstable();
     out
+}
+
+/// Visits every grid cell the segment from `a` to `b` (grid units) passes through, in order
+/// (Amanatides–Woo traversal), so no block along the truncation band is skipped.
+fn walk_blocks(a: &Vector3<f32>, b: &Vector3<f32>, mut visit: impl FnMut(BlockCoord)) {
+    let mut cell = [a.x.floor() as i32, a.y.floor() as i32, a.z.floor() as i32];
+    let end = [b.x.floor() as i32, b.y.floor() as i32, b.z.floor() as i32];
+    let dir = b - a;
+    let mut step = [0i32; 3];
+    let mut t_max = [f32::INFINITY; 3];
+    let mut t_delta = [f32::INFINITY; 3];
+    for i in 0..3 {
+        if dir[i] > 0.0 {
+            step[i] = 1;
+            t_delta[i] = 1.0 / dir[i];
+            t_max[i] = (cell[i] as f32 + 1.0 - a[i]) / dir[i];
+        } else if dir[i] < 0.0 {
+            step[i] = -1;
+            t_delta[i] = -1.0 / dir[i];
+            t_max[i] = (a[i] - cell[i] as f32) / -dir[i];
+        }
+    }
+    visit(cell);
+    let max_steps = (0..3)
+        .map(|i| (end[i] - cell[i]).unsigned_abs())
+        .sum::<u32>();
+    for _ in 0..max_steps {
+        let axis = if t_max[0] <= t_max[1] && t_max[0] <= t_max[2] {
+            0
+        } else if t_max[1] <= t_max[2] {
+            1
+        } else {
+            2
+        };
+        if t_max[axis] > 1.0 {
+            break;
+        }
+        cell[axis] += step[axis];
+        t_max[axis] += t_delta[axis];
+        visit(cell);
+    }
 }
 
 /// Everything the per-voxel update needs, in f32.

@@ -55,7 +55,7 @@ pub enum TsdfError {
         /// Why it was rejected.
         reason: &'static str,
     },
-    /// The frame's images do not have the camera's size.
+    /// The frame's colour or depth image does not have the camera's size.
     #[error("frame {frame} is {width}×{height}, but the camera is {camera_width}×{camera_height}")]
     FrameSize {
         /// Index of the frame (0 for a single integration).

@@ -275,6 +275,7 @@ fn sphere_is_accurate_complete_and_watertight() {
     let mesh = extract_mesh(&volume, &MeshingConfig::default());
     mesh.validate().unwrap();
     let (mean, fscore) = score(&shape, &mesh, f64::from(VOXEL));
+    eprintln!("sphere: mean distance {mean:.6} m, F-score {fscore:.4} at 1 voxel");
     assert!(mean < 0.25 * f64::from(VOXEL), "mean distance {mean}");
     assert!(fscore >= 0.98, "F-score {fscore}");
     check_watertight(&mesh);
@@ -316,6 +317,7 @@ fn box_is_accurate_and_complete() {
     let (volume, _, _) = fuse(&shape, TsdfConfig::default());
     let mesh = extract_mesh(&volume, &MeshingConfig::default());
     let (mean, fscore) = score(&shape, &mesh, f64::from(VOXEL));
+    eprintln!("box: mean distance {mean:.6} m, F-score {fscore:.4} at 1 voxel");
     assert!(mean < 0.25 * f64::from(VOXEL), "mean distance {mean}");
     assert!(fscore >= 0.98, "F-score {fscore}");
     check_watertight(&mesh);
@@ -501,6 +503,12 @@ fn rejects_bad_input() {
     let small = PinholeCamera::from_hfov(160, 120, 60.0).unwrap();
     assert!(matches!(
         volume.integrate(&frame, &small, &Isometry3::identity()),
+        Err(TsdfError::FrameSize { .. })
+    ));
+    let mut short_depth = frame.clone();
+    short_depth.depth_m = DepthImage::filled(10, 10, 1.0);
+    assert!(matches!(
+        volume.integrate(&short_depth, &camera(), &Isometry3::identity()),
         Err(TsdfError::FrameSize { .. })
     ));
     let mut bad = Isometry3::identity();
