@@ -156,3 +156,64 @@ fn bad_input_fails_with_a_message_naming_the_culprit() {
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("path.txt:2"));
 }
+
+#[test]
+fn plan_flies_the_mapping_rings_of_a_target() {
+    let dir = TempDir::new("plan");
+    let out = scarp(&["plan", "--target", "2", "--out", path_str(&dir.0), "--json"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let flight: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.0.join("flight.json")).unwrap()).unwrap();
+    for key in [
+        "position_rms_m",
+        "position_max_m",
+        "yaw_max_deg",
+        "speed_max_mps",
+        "accel_max_mps2",
+        "min_clearance_m",
+        "duration_s",
+    ] {
+        assert!(flight[key].is_number(), "{key}");
+    }
+    assert!(flight["position_rms_m"].as_f64().unwrap() <= 0.10);
+    assert!(flight["position_max_m"].as_f64().unwrap() <= 0.30);
+    assert!(flight["yaw_max_deg"].as_f64().unwrap() <= 5.0);
+    assert!(flight["speed_max_mps"].as_f64().unwrap() <= 1.0 + 1e-6);
+    assert!(flight["min_clearance_m"].as_f64().unwrap() >= 1.5);
+    for file in [
+        "rings.csv",
+        "waypoints.csv",
+        "trajectory.csv",
+        "trajectory.txt",
+        "top.png",
+        "side.png",
+    ] {
+        assert!(dir.0.join(file).exists(), "{file}");
+    }
+    assert!(
+        !scarp_export::tum::read_tum_trajectory(&dir.0.join("trajectory.txt"))
+            .unwrap()
+            .is_empty()
+    );
+
+    for (target, needle) in [
+        ("999", "no rock 999"),
+        ("0,0,-100", "terrain"),
+        ("1,2", "x,y,z"),
+    ] {
+        let out = scarp(&[
+            "plan",
+            "--target",
+            target,
+            "--out",
+            path_str(&dir.0.join("bad")),
+        ]);
+        assert!(!out.status.success(), "{target}");
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(stderr.contains(needle), "{target}: {stderr}");
+    }
+}

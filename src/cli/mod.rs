@@ -6,6 +6,7 @@ pub mod eval;
 pub mod fragility;
 pub mod map;
 pub mod odometry;
+pub mod plan;
 pub mod render;
 pub mod simulate;
 pub mod world;
@@ -43,6 +44,8 @@ pub enum Command {
     World(world::WorldArgs),
     /// Print every tunable with its default, as TOML.
     Config(config::ConfigArgs),
+    /// Plan the mapping rings around a target, make a min-snap trajectory and fly it.
+    Plan(plan::PlanArgs),
     /// Fuse an RGB-D sequence into a TSDF volume and mesh it (`mesh.ply`, `mesh.glb`,
     /// `map.json`).
     Map(map::MapArgs),
@@ -62,6 +65,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Render(args) => render::run(args),
         Command::World(args) => world::run(args),
         Command::Config(args) => config::run(args),
+        Command::Plan(args) => plan::run(args),
         Command::Map(args) => map::run(args),
     }
 }
