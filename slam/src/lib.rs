@@ -29,6 +29,7 @@
 //! assert!((pixel.x - camera.cx).abs() < 1e-9 && (pixel.y - camera.cy).abs() < 1e-9);
 //! ```
 
+pub mod ba;
 pub mod error;
 pub mod frame;
 pub mod geometry;
