@@ -162,7 +162,11 @@ fn ba_solves_the_shrunk_bal_problem_and_prints_json() {
     let file = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("slam/tests/data/bal-ladybug-problem-49-7776-pre-shrink-1800.txt");
     let out = scarp(&["ba", path_str(&file), "--threads", "2", "--json"]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(json["cameras"], 49);
     assert_eq!(json["points"], 1800);
@@ -186,5 +190,8 @@ fn ba_rejects_a_malformed_file_naming_the_line() {
     let out = scarp(&["ba", path_str(&file), "--json"]);
     assert!(!out.status.success());
     let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(stderr.contains("bad.txt:2") && stderr.contains("not finite"), "{stderr}");
+    assert!(
+        stderr.contains("bad.txt:2") && stderr.contains("not finite"),
+        "{stderr}"
+    );
 }

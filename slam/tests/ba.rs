@@ -26,9 +26,18 @@ fn shared_bal_dir() -> PathBuf {
 }
 
 /// A Snavely camera at `center` looking at the origin (its −z axis towards the origin).
-fn camera_looking_at_origin(center: Vector3<f64>, focal_px: f64, k1: f64, k2: f64) -> SnavelyCamera {
+fn camera_looking_at_origin(
+    center: Vector3<f64>,
+    focal_px: f64,
+    k1: f64,
+    k2: f64,
+) -> SnavelyCamera {
     let z = center.normalize();
-    let up = if z.z.abs() < 0.9 { Vector3::z() } else { Vector3::x() };
+    let up = if z.z.abs() < 0.9 {
+        Vector3::z()
+    } else {
+        Vector3::x()
+    };
     let x = up.cross(&z).normalize();
     let y = z.cross(&x);
     let rotation = Rotation3::from_matrix_unchecked(Matrix3::from_rows(&[
@@ -202,9 +211,14 @@ fn synthetic_problems_converge_back_to_the_truth() {
         let truth = synthetic(seed, 6, 40);
         let (mut cameras, mut points) = perturbed(&truth, 100 + seed);
         let before = relative_error(&truth, &cameras, &points);
-        let summary =
-            solve(&SnavelyModel, &mut cameras, &mut points, &truth.observations, &tight_config())
-                .unwrap();
+        let summary = solve(
+            &SnavelyModel,
+            &mut cameras,
+            &mut points,
+            &truth.observations,
+            &tight_config(),
+        )
+        .unwrap();
         let after = relative_error(&truth, &cameras, &points);
         assert!(before > 1e-3, "the start must be perturbed ({before})");
         assert!(
@@ -228,18 +242,35 @@ fn sparse_and_dense_reduced_solvers_agree() {
         ..LmConfig::default()
     };
     let (mut cd, mut pd) = (cameras0.clone(), points0.clone());
-    let dense = solve(&SnavelyModel, &mut cd, &mut pd, &truth.observations, &config).unwrap();
+    let dense = solve(
+        &SnavelyModel,
+        &mut cd,
+        &mut pd,
+        &truth.observations,
+        &config,
+    )
+    .unwrap();
     let (mut cs, mut ps) = (cameras0, points0);
     let sparse_config = LmConfig {
         dense_max_unknowns: 0,
         ..config
     };
-    let sparse = solve(&SnavelyModel, &mut cs, &mut ps, &truth.observations, &sparse_config).unwrap();
+    let sparse = solve(
+        &SnavelyModel,
+        &mut cs,
+        &mut ps,
+        &truth.observations,
+        &sparse_config,
+    )
+    .unwrap();
     assert_eq!(dense.linear_solver, LinearSolverKind::DenseCholesky);
     assert_eq!(sparse.linear_solver, LinearSolverKind::SparseCholesky);
     assert_eq!(dense.iterations, sparse.iterations);
     for (a, b) in dense.costs.iter().zip(&sparse.costs) {
-        assert!((a - b).abs() <= 1e-6 * a.max(1e-9), "dense {a} vs sparse {b}");
+        assert!(
+            (a - b).abs() <= 1e-6 * a.max(1e-9),
+            "dense {a} vs sparse {b}"
+        );
     }
     for (a, b) in pd.iter().zip(&ps) {
         assert!((a - b).norm() < 1e-6);
@@ -280,7 +311,7 @@ fn robust_losses_resist_outliers() {
     let truth = synthetic(21, 6, 60);
     let mut observations = truth.observations.clone();
     // Every 29th observation is off by 50 pixels.
-    let is_outlier = |k: usize| k % 29 == 0;
+    let is_outlier = |k: usize| k.is_multiple_of(29);
     for (k, o) in observations.iter_mut().enumerate() {
         if is_outlier(k) {
             o.pixel += Vector2::new(40.0, -30.0);
@@ -315,9 +346,18 @@ fn robust_losses_resist_outliers() {
     let [trivial, huber, cauchy] = worst_inlier_px[..] else {
         unreachable!("three losses were run")
     };
-    assert!(trivial > 5.0, "least squares spreads the outliers: {trivial}");
-    assert!(huber < 0.5 * trivial, "Huber {huber} vs least squares {trivial}");
-    assert!(cauchy < 0.05 * trivial && cauchy < 1.0, "Cauchy {cauchy} vs least squares {trivial}");
+    assert!(
+        trivial > 5.0,
+        "least squares spreads the outliers: {trivial}"
+    );
+    assert!(
+        huber < 0.5 * trivial,
+        "Huber {huber} vs least squares {trivial}"
+    );
+    assert!(
+        cauchy < 0.05 * trivial && cauchy < 1.0,
+        "Cauchy {cauchy} vs least squares {trivial}"
+    );
 }
 
 #[test]
@@ -329,8 +369,14 @@ fn bad_problems_and_settings_are_rejected() {
     let err = solve(&SnavelyModel, &mut c, &mut p, &bad, &LmConfig::default()).unwrap_err();
     assert!(err.to_string().contains("observation 0"), "{err}");
     p[1].y = f64::NAN;
-    let err =
-        solve(&SnavelyModel, &mut c, &mut p, &truth.observations, &LmConfig::default()).unwrap_err();
+    let err = solve(
+        &SnavelyModel,
+        &mut c,
+        &mut p,
+        &truth.observations,
+        &LmConfig::default(),
+    )
+    .unwrap_err();
     assert!(err.to_string().contains("point 1"), "{err}");
     p[1].y = 0.0;
     let config = LmConfig {
@@ -346,11 +392,19 @@ fn bal_shrink_1800_matches_ceres() {
     let mut problem =
         read_bal(data_dir().join("bal-ladybug-problem-49-7776-pre-shrink-1800.txt")).unwrap();
     assert_eq!(
-        (problem.cameras.len(), problem.points.len(), problem.observations.len()),
+        (
+            problem.cameras.len(),
+            problem.points.len(),
+            problem.observations.len()
+        ),
         (49, 1800, 10863)
     );
     let summary = solve_bal(&mut problem, &LmConfig::default()).unwrap();
-    assert!((summary.initial_cost - 234519.80).abs() < 0.01, "{}", summary.initial_cost);
+    assert!(
+        (summary.initial_cost - 234519.80).abs() < 0.01,
+        "{}",
+        summary.initial_cost
+    );
     let relative = (summary.final_cost - CERES_SHRINK_1800) / CERES_SHRINK_1800;
     assert!(
         relative < 1e-3,
@@ -370,7 +424,11 @@ fn bal_problem_49_7776_matches_ceres() {
     }
     let mut problem = read_bal(&path).unwrap();
     let summary = solve_bal(&mut problem, &LmConfig::default()).unwrap();
-    assert!((summary.initial_cost - 850912.46).abs() < 0.01, "{}", summary.initial_cost);
+    assert!(
+        (summary.initial_cost - 850912.46).abs() < 0.01,
+        "{}",
+        summary.initial_cost
+    );
     let relative = (summary.final_cost - CERES_PROBLEM_49_7776) / CERES_PROBLEM_49_7776;
     assert!(
         relative < 1e-3,

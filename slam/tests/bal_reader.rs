@@ -59,7 +59,10 @@ fn error_of(text: &str) -> (usize, String) {
 #[test]
 fn a_valid_file_parses() {
     let p = parse(SMALL).unwrap();
-    assert_eq!((p.cameras.len(), p.points.len(), p.observations.len()), (2, 3, 5));
+    assert_eq!(
+        (p.cameras.len(), p.points.len(), p.observations.len()),
+        (2, 3, 5)
+    );
     assert_eq!(
         p.observations[2],
         Observation {
@@ -94,8 +97,14 @@ fn truncated_files_name_what_is_missing() {
     for keep in [0, 1, 3, 6, 14, 30] {
         let text = lines[..keep].join("\n");
         let (line, reason) = error_of(&text);
-        assert!(reason.contains("truncated") || reason.contains("need more numbers"), "{reason}");
-        assert!(line >= 1 && line <= keep.max(1), "line {line} for {keep} lines");
+        assert!(
+            reason.contains("truncated") || reason.contains("need more numbers"),
+            "{reason}"
+        );
+        assert!(
+            line >= 1 && line <= keep.max(1),
+            "line {line} for {keep} lines"
+        );
     }
     let text = lines[..lines.len() - 1].join("\n");
     let (_, reason) = error_of(&text);
@@ -110,7 +119,10 @@ fn negative_and_absurd_counts_are_rejected() {
     let (_, reason) = error_of(&SMALL.replacen("2 3 5", "2 3 99999999999999", 1));
     assert!(reason.contains("need more numbers"), "{reason}");
     let (_, reason) = error_of(&SMALL.replacen("2 3 5", "18446744073709551615 3 5", 1));
-    assert!(reason.contains("integer") || reason.contains("need more"), "{reason}");
+    assert!(
+        reason.contains("integer") || reason.contains("need more"),
+        "{reason}"
+    );
     let (_, reason) = error_of(&SMALL.replacen("2 3 5", "2 x 5", 1));
     assert!(reason.contains("not an integer"), "{reason}");
 }
@@ -119,20 +131,29 @@ fn negative_and_absurd_counts_are_rejected() {
 fn non_finite_and_non_numeric_values_name_the_line() {
     let (line, reason) = error_of(&SMALL.replacen("0 1 4.0 -2.0", "0 1 nan -2.0", 1));
     assert_eq!(line, 3);
-    assert!(reason.contains("x of observation 1") && reason.contains("not finite"), "{reason}");
+    assert!(
+        reason.contains("x of observation 1") && reason.contains("not finite"),
+        "{reason}"
+    );
     let (line, reason) = error_of(&SMALL.replacen("\n480\n", "\ninf\n", 1));
     assert_eq!(line, 22);
     assert!(reason.contains("focal length of camera 1"), "{reason}");
     let (line, reason) = error_of(&SMALL.replacen("\n0.4\n", "\n0.4abc\n", 1));
     assert_eq!(line, 30);
-    assert!(reason.contains("point 1") && reason.contains("not a number"), "{reason}");
+    assert!(
+        reason.contains("point 1") && reason.contains("not a number"),
+        "{reason}"
+    );
 }
 
 #[test]
 fn bad_indices_name_the_line() {
     let (line, reason) = error_of(&SMALL.replacen("1 2 -3 7", "2 2 -3 7", 1));
     assert_eq!(line, 6);
-    assert!(reason.contains("camera index 2 of observation 4"), "{reason}");
+    assert!(
+        reason.contains("camera index 2 of observation 4"),
+        "{reason}"
+    );
     let (line, reason) = error_of(&SMALL.replacen("1 2 -3 7", "1 -1 -3 7", 1));
     assert_eq!(line, 6);
     assert!(reason.contains("point index -1"), "{reason}");
@@ -144,9 +165,15 @@ fn bad_indices_name_the_line() {
 fn non_utf8_and_missing_files_are_errors() {
     let mut bytes = SMALL.as_bytes().to_vec();
     bytes[22] = 0xff; // inside line 3
-    assert!(matches!(parse_bal(&bytes, "x"), Err(BaError::Parse { line: 3, .. })));
+    assert!(matches!(
+        parse_bal(&bytes, "x"),
+        Err(BaError::Parse { line: 3, .. })
+    ));
     let err = read_bal("/nonexistent/problem.txt").unwrap_err();
-    assert!(err.to_string().contains("/nonexistent/problem.txt"), "{err}");
+    assert!(
+        err.to_string().contains("/nonexistent/problem.txt"),
+        "{err}"
+    );
 }
 
 /// Seeded random mutations (byte flips, insertions, deletions, truncations, token swaps) of a
@@ -195,5 +222,8 @@ fn random_mutations_never_panic() {
             assert!(cameras_finite);
         }
     }
-    assert!(accepted > 0, "some mutations (digit changes) keep the file valid");
+    assert!(
+        accepted > 0,
+        "some mutations (digit changes) keep the file valid"
+    );
 }

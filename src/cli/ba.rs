@@ -98,7 +98,11 @@ pub fn run(args: BaArgs) -> anyhow::Result<()> {
                 "iter {:3}  cost {:.6e}  {}  radius {:.2e}  |g|∞ {:.2e}  |δ| {:.2e}",
                 entry.iteration,
                 entry.cost,
-                if entry.accepted { "accepted" } else { "rejected" },
+                if entry.accepted {
+                    "accepted"
+                } else {
+                    "rejected"
+                },
                 entry.trust_region_radius,
                 entry.gradient_max_norm,
                 entry.step_norm,

@@ -108,18 +108,16 @@ impl<'a> Tokens<'a> {
 
     fn count(&mut self, what: &'static str) -> Result<usize, BaError> {
         let (token, line) = self.next(&|| format!("the header's {what}"))?;
-        let value: i64 = token.parse().map_err(|_| {
-            self.error(
-                line,
-                format!("header {what} `{token}` is not an integer"),
-            )
-        })?;
+        let value: i64 = token
+            .parse()
+            .map_err(|_| self.error(line, format!("header {what} `{token}` is not an integer")))?;
         usize::try_from(value)
             .map_err(|_| self.error(line, format!("header {what} is negative ({value})")))
     }
 
     fn index(&mut self, what: &str, observation: usize, limit: usize) -> Result<usize, BaError> {
-        let (token, line) = self.next(&|| format!("the {what} index of observation {observation}"))?;
+        let (token, line) =
+            self.next(&|| format!("the {what} index of observation {observation}"))?;
         let value: i64 = token.parse().map_err(|_| {
             self.error(
                 line,
@@ -139,9 +137,9 @@ impl<'a> Tokens<'a> {
 
     fn number(&mut self, expected: &dyn Fn() -> String) -> Result<f64, BaError> {
         let (token, line) = self.next(expected)?;
-        let value: f64 = token.parse().map_err(|_| {
-            self.error(line, format!("{} `{token}` is not a number", expected()))
-        })?;
+        let value: f64 = token
+            .parse()
+            .map_err(|_| self.error(line, format!("{} `{token}` is not a number", expected())))?;
         if !value.is_finite() {
             return Err(self.error(line, format!("{} is not finite ({token})", expected())));
         }
@@ -157,7 +155,10 @@ impl<'a> Tokens<'a> {
 /// and camera or point indices out of range. Trailing text after the last point is ignored.
 pub fn parse_bal(bytes: &[u8], source_name: &str) -> Result<BalProblem, BaError> {
     let text = std::str::from_utf8(bytes).map_err(|e| {
-        let line = 1 + bytes[..e.valid_up_to()].iter().filter(|&&b| b == b'\n').count();
+        let line = 1 + bytes[..e.valid_up_to()]
+            .iter()
+            .filter(|&&b| b == b'\n')
+            .count();
         BaError::Parse {
             source_name: source_name.to_string(),
             line,
@@ -205,8 +206,15 @@ pub fn parse_bal(bytes: &[u8], source_name: &str) -> Result<BalProblem, BaError>
     }
 
     const CAMERA_FIELDS: [&str; 9] = [
-        "rotation x", "rotation y", "rotation z", "translation x", "translation y",
-        "translation z", "focal length", "k1", "k2",
+        "rotation x",
+        "rotation y",
+        "rotation z",
+        "translation x",
+        "translation y",
+        "translation z",
+        "focal length",
+        "k1",
+        "k2",
     ];
     let mut cameras = Vec::with_capacity(num_cameras);
     for c in 0..num_cameras {
@@ -233,7 +241,10 @@ pub fn parse_bal(bytes: &[u8], source_name: &str) -> Result<BalProblem, BaError>
 }
 
 /// Builds a rigid `camera_from_world` transform from a BAL angle-axis rotation and translation.
-pub(crate) fn isometry_from_angle_axis(angle_axis: &Vector3<f64>, t: &Vector3<f64>) -> Isometry3<f64> {
+pub(crate) fn isometry_from_angle_axis(
+    angle_axis: &Vector3<f64>,
+    t: &Vector3<f64>,
+) -> Isometry3<f64> {
     Isometry3::from_parts(
         Translation3::from(*t),
         UnitQuaternion::from_scaled_axis(*angle_axis),
@@ -253,7 +264,11 @@ pub fn format_bal(problem: &BalProblem) -> String {
         problem.observations.len()
     );
     for o in &problem.observations {
-        let _ = writeln!(out, "{} {} {:e} {:e}", o.camera, o.point, o.pixel.x, o.pixel.y);
+        let _ = writeln!(
+            out,
+            "{} {} {:e} {:e}",
+            o.camera, o.point, o.pixel.x, o.pixel.y
+        );
     }
     for c in &problem.cameras {
         for v in c.bal_parameters() {

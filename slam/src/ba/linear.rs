@@ -198,8 +198,7 @@ impl ReducedSolver {
                         Default::default(),
                     )
                     .map_err(|e| LinearSolveFailure(format!("sparse Cholesky failed: {e:?}")))?;
-                let mut sbuf =
-                    MemBuffer::new(factor.solve_in_place_scratch::<f64>(1, Par::Seq));
+                let mut sbuf = MemBuffer::new(factor.solve_in_place_scratch::<f64>(1, Par::Seq));
                 llt_ref.solve_in_place_with_conj(
                     Conj::No,
                     b.as_mut(),

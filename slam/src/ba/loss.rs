@@ -31,7 +31,11 @@ impl RobustLoss {
             RobustLoss::Trivial => s,
             RobustLoss::Huber { delta_px } => {
                 let d2 = delta_px * delta_px;
-                if s <= d2 { s } else { 2.0 * delta_px * s.sqrt() - d2 }
+                if s <= d2 {
+                    s
+                } else {
+                    2.0 * delta_px * s.sqrt() - d2
+                }
             }
             RobustLoss::Cauchy { scale_px } => {
                 let c2 = scale_px * scale_px;

@@ -38,8 +38,12 @@ pub trait CameraModel<const C: usize>: Sync {
 
     /// Predicted minus observed image position. It may be non-finite (a point on the camera
     /// plane); the solver then rejects the step that led there.
-    fn residual(&self, camera: &Self::Camera, point: &Vector3<f64>, observed: &Vector2<f64>)
-    -> Vector2<f64>;
+    fn residual(
+        &self,
+        camera: &Self::Camera,
+        point: &Vector3<f64>,
+        observed: &Vector2<f64>,
+    ) -> Vector2<f64>;
 
     /// The residual with its analytic Jacobians at the current parameters.
     fn linearize(

@@ -46,7 +46,17 @@ impl SnavelyCamera {
     pub fn bal_parameters(&self) -> [f64; 9] {
         let w = self.camera_from_world.rotation.scaled_axis();
         let t = self.camera_from_world.translation.vector;
-        [w.x, w.y, w.z, t.x, t.y, t.z, self.focal_px, self.k1, self.k2]
+        [
+            w.x,
+            w.y,
+            w.z,
+            t.x,
+            t.y,
+            t.z,
+            self.focal_px,
+            self.k1,
+            self.k2,
+        ]
     }
 
     /// The predicted image position of world point `point_world` (pixels, BAL convention).
@@ -103,14 +113,7 @@ impl CameraModel<SNAVELY_CAMERA_DOF> for SnavelyModel {
         let dd = 2.0 * camera.k1 + 4.0 * camera.k2 * r2;
         let d_pred_d_p = (Matrix2::identity() * d + p * p.transpose() * dd) * f;
         // ∂p/∂P for p = −P.xy/P.z.
-        let d_p_d_pcam = Matrix2x3::new(
-            -inv_z,
-            0.0,
-            -p.x * inv_z,
-            0.0,
-            -inv_z,
-            -p.y * inv_z,
-        );
+        let d_p_d_pcam = Matrix2x3::new(-inv_z, 0.0, -p.x * inv_z, 0.0, -inv_z, -p.y * inv_z);
         let d_pred_d_pcam = d_pred_d_p * d_p_d_pcam;
 
         let mut jacobian_camera = SMatrix::<f64, 2, SNAVELY_CAMERA_DOF>::zeros();
@@ -136,11 +139,11 @@ impl CameraModel<SNAVELY_CAMERA_DOF> for SnavelyModel {
         camera: &SnavelyCamera,
         delta: &SVector<f64, SNAVELY_CAMERA_DOF>,
     ) -> SnavelyCamera {
-        let rotation = nalgebra::UnitQuaternion::from_scaled_axis(Vector3::new(
-            delta[0], delta[1], delta[2],
-        )) * camera.camera_from_world.rotation;
-        let translation =
-            camera.camera_from_world.translation.vector + Vector3::new(delta[3], delta[4], delta[5]);
+        let rotation =
+            nalgebra::UnitQuaternion::from_scaled_axis(Vector3::new(delta[0], delta[1], delta[2]))
+                * camera.camera_from_world.rotation;
+        let translation = camera.camera_from_world.translation.vector
+            + Vector3::new(delta[3], delta[4], delta[5]);
         SnavelyCamera {
             camera_from_world: Isometry3::from_parts(translation.into(), rotation),
             focal_px: camera.focal_px + delta[6],

@@ -76,7 +76,10 @@ impl LmConfig {
             ("function_tolerance", self.function_tolerance),
             ("gradient_tolerance", self.gradient_tolerance),
             ("parameter_tolerance", self.parameter_tolerance),
-            ("initial_trust_region_radius", self.initial_trust_region_radius),
+            (
+                "initial_trust_region_radius",
+                self.initial_trust_region_radius,
+            ),
             ("max_trust_region_radius", self.max_trust_region_radius),
             ("min_trust_region_radius", self.min_trust_region_radius),
             ("min_diagonal", self.min_diagonal),
@@ -98,7 +101,8 @@ impl LmConfig {
                 reason: "must be positive",
             });
         }
-        if !(self.min_relative_decrease.is_finite() && (0.0..1.0).contains(&self.min_relative_decrease))
+        if !(self.min_relative_decrease.is_finite()
+            && (0.0..1.0).contains(&self.min_relative_decrease))
         {
             return Err(BaError::InvalidConfig {
                 field: "min_relative_decrease",
@@ -206,8 +210,7 @@ fn group_by(keys: impl Iterator<Item = usize> + Clone, groups: usize) -> (Vec<us
 
 impl Structure {
     fn new(observations: &[Observation], num_cameras: usize, num_points: usize) -> Self {
-        let (point_offsets, point_obs) =
-            group_by(observations.iter().map(|o| o.point), num_points);
+        let (point_offsets, point_obs) = group_by(observations.iter().map(|o| o.point), num_points);
         let (camera_offsets, camera_obs) =
             group_by(observations.iter().map(|o| o.camera), num_cameras);
         let rows: Vec<Vec<usize>> = (0..num_cameras)
@@ -358,11 +361,7 @@ struct Step<const C: usize> {
 }
 
 /// Adds μ·clamp(diag) to the diagonal of a square block.
-fn damp<const N: usize>(
-    m: &SMatrix<f64, N, N>,
-    mu: f64,
-    config: &LmConfig,
-) -> SMatrix<f64, N, N> {
+fn damp<const N: usize>(m: &SMatrix<f64, N, N>, mu: f64, config: &LmConfig) -> SMatrix<f64, N, N> {
     let mut out = *m;
     for k in 0..N {
         out[(k, k)] += mu * m[(k, k)].clamp(config.min_diagonal, config.max_diagonal);
@@ -510,8 +509,9 @@ pub fn solve<M: CameraModel<C>, const C: usize>(
     config.validate()?;
     validate_problem(model, cameras, points, observations)?;
     let structure = Structure::new(observations, cameras.len(), points.len());
-    let solver = ReducedSolver::new::<C>(&structure.pattern, cameras.len(), config.dense_max_unknowns)
-        .map_err(|e| BaError::InvalidProblem { reason: e.0 })?;
+    let solver =
+        ReducedSolver::new::<C>(&structure.pattern, cameras.len(), config.dense_max_unknowns)
+            .map_err(|e| BaError::InvalidProblem { reason: e.0 })?;
     let loss = config.loss;
     let initial_cost = total_cost(model, &loss, cameras, points, observations);
     if !initial_cost.is_finite() {
@@ -550,7 +550,14 @@ pub fn solve<M: CameraModel<C>, const C: usize>(
             step_norm: 0.0,
             step_quality: f64::NAN,
         };
-        let step = compute_step(&normal, &structure, &solver, observations, 1.0 / radius, config);
+        let step = compute_step(
+            &normal,
+            &structure,
+            &solver,
+            observations,
+            1.0 / radius,
+            config,
+        );
         let mut stop = None;
         match step {
             Some(step) if step.norm.is_finite() => {
@@ -560,8 +567,11 @@ pub fn solve<M: CameraModel<C>, const C: usize>(
                     .zip(step.cameras.par_iter())
                     .map(|(c, d)| model.retract(c, d))
                     .collect();
-                let new_points: Vec<Vector3<f64>> =
-                    points.iter().zip(&step.points).map(|(p, d)| p + d).collect();
+                let new_points: Vec<Vector3<f64>> = points
+                    .iter()
+                    .zip(&step.points)
+                    .map(|(p, d)| p + d)
+                    .collect();
                 let x_norm = (cameras
                     .iter()
                     .map(|c| model.parameter_norm_squared(c))
@@ -577,8 +587,7 @@ pub fn solve<M: CameraModel<C>, const C: usize>(
                     f64::NAN
                 };
                 entry.step_quality = quality;
-                if step.norm <= config.parameter_tolerance * (x_norm + config.parameter_tolerance)
-                {
+                if step.norm <= config.parameter_tolerance * (x_norm + config.parameter_tolerance) {
                     stop = Some(Termination::ParameterTolerance);
                 } else if candidate_cost.is_finite()
                     && (cost - candidate_cost).abs() <= config.function_tolerance * cost
