@@ -6,6 +6,8 @@
 //! - [`problem`]: the generic problem ([`Observation`], the [`CameraModel`] trait).
 //! - [`snavely`]: the Snavely (BAL) camera and its reprojection cost.
 //! - [`bal`]: the BAL file reader.
+//! - [`keyframe`]: the mapping pipeline's problem (SE(3) keyframe poses, fixed pinhole
+//!   intrinsics, reprojection and RGBD depth residuals, relative and absolute pose priors).
 //! - [`loss`]: robust losses.
 //! - [`solver`]: the Levenberg–Marquardt loop ([`solve`], [`LmConfig`], [`BaSummary`]).
 //!
@@ -35,6 +37,7 @@
 
 pub mod bal;
 pub mod error;
+pub mod keyframe;
 mod linear;
 pub mod loss;
 pub mod problem;
@@ -43,9 +46,13 @@ pub mod solver;
 
 pub use bal::{BalProblem, parse_bal, read_bal};
 pub use error::BaError;
+pub use keyframe::{
+    AbsolutePosePrior, KeyframeModel, KeyframeNoise, KeyframeObservation, POSE_DOF,
+    RelativePosePrior,
+};
 pub use linear::LinearSolverKind;
 pub use loss::RobustLoss;
-pub use problem::{CameraModel, Linearization, Observation};
+pub use problem::{CameraModel, Indexed, Linearization, Observation, PriorLinearization};
 pub use snavely::{SNAVELY_CAMERA_DOF, SnavelyCamera, SnavelyModel};
 pub use solver::{BaSummary, IterationLog, LmConfig, Termination, solve};
 

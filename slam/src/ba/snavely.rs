@@ -7,6 +7,8 @@
 
 use nalgebra::{Isometry3, Matrix2, Matrix2x3, Matrix3, SMatrix, SVector, Vector2, Vector3};
 
+use super::problem::Observation;
+
 use super::bal::isometry_from_angle_axis;
 use super::problem::{CameraModel, Linearization};
 
@@ -81,24 +83,26 @@ pub(crate) fn skew(a: &Vector3<f64>) -> Matrix3<f64> {
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct SnavelyModel;
 
-impl CameraModel<SNAVELY_CAMERA_DOF> for SnavelyModel {
+impl CameraModel<SNAVELY_CAMERA_DOF, 2> for SnavelyModel {
     type Camera = SnavelyCamera;
+    type Observation = Observation;
 
     fn residual(
         &self,
         camera: &SnavelyCamera,
         point: &Vector3<f64>,
-        observed: &Vector2<f64>,
+        observation: &Observation,
     ) -> Vector2<f64> {
-        camera.project(point) - observed
+        camera.project(point) - observation.pixel
     }
 
     fn linearize(
         &self,
         camera: &SnavelyCamera,
         point: &Vector3<f64>,
-        observed: &Vector2<f64>,
-    ) -> Linearization<SNAVELY_CAMERA_DOF> {
+        observation: &Observation,
+    ) -> Linearization<SNAVELY_CAMERA_DOF, 2> {
+        let observed = &observation.pixel;
         let rotation = camera.camera_from_world.rotation.to_rotation_matrix();
         let rotated = rotation * point;
         let p_cam = rotated + camera.camera_from_world.translation.vector;
@@ -173,7 +177,11 @@ mod tests {
             0.1, -0.2, 0.3, 0.5, -0.4, -6.0, 520.0, -0.03, 0.002,
         ]);
         let point = Vector3::new(0.3, -0.7, 0.4);
-        let observed = Vector2::new(10.0, -4.0);
+        let observed = Observation {
+            camera: 0,
+            point: 0,
+            pixel: Vector2::new(10.0, -4.0),
+        };
         let lin = model.linearize(&camera, &point, &observed);
         assert!((lin.residual - model.residual(&camera, &point, &observed)).norm() < 1e-9);
         let h = 1e-6;

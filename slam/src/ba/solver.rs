@@ -7,14 +7,14 @@
 //! (see [`super::linear`]), back-substitutes the point updates, and accepts the step when the
 //! actual cost decrease is a large enough fraction of the predicted one.
 
-use nalgebra::{Matrix3, SMatrix, SVector, Vector2, Vector3};
+use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::error::BaError;
 use super::linear::{BlockPattern, LinearSolverKind, ReducedSolver};
 use super::loss::RobustLoss;
-use super::problem::{CameraModel, Observation};
+use super::problem::{CameraModel, Indexed, PriorLinearization};
 
 /// Settings of the Levenberg–Marquardt solver. The defaults follow Ceres Solver's.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -187,6 +187,10 @@ struct Structure {
     point_obs: Vec<usize>,
     camera_offsets: Vec<usize>,
     camera_obs: Vec<usize>,
+    /// Per camera, the prior terms that involve it (ascending).
+    camera_priors: Vec<Vec<usize>>,
+    /// Per prior term, its cameras.
+    prior_cameras: Vec<[Option<usize>; 2]>,
     pattern: BlockPattern,
 }
 
@@ -209,18 +213,37 @@ fn group_by(keys: impl Iterator<Item = usize> + Clone, groups: usize) -> (Vec<us
 }
 
 impl Structure {
-    fn new(observations: &[Observation], num_cameras: usize, num_points: usize) -> Self {
-        let (point_offsets, point_obs) = group_by(observations.iter().map(|o| o.point), num_points);
+    fn new<O: Indexed + Sync>(
+        observations: &[O],
+        prior_cameras: Vec<[Option<usize>; 2]>,
+        num_cameras: usize,
+        num_points: usize,
+    ) -> Self {
+        let (point_offsets, point_obs) =
+            group_by(observations.iter().map(|o| o.point()), num_points);
         let (camera_offsets, camera_obs) =
-            group_by(observations.iter().map(|o| o.camera), num_cameras);
+            group_by(observations.iter().map(|o| o.camera()), num_cameras);
+        let mut camera_priors = vec![Vec::new(); num_cameras];
+        for (k, cams) in prior_cameras.iter().enumerate() {
+            for &c in cams.iter().flatten() {
+                camera_priors[c].push(k);
+            }
+        }
         let rows: Vec<Vec<usize>> = (0..num_cameras)
             .into_par_iter()
             .map(|i| {
                 let mut cols = vec![i];
+                for &k in &camera_priors[i] {
+                    for &j in prior_cameras[k].iter().flatten() {
+                        if j > i {
+                            cols.push(j);
+                        }
+                    }
+                }
                 for &o in &camera_obs[camera_offsets[i]..camera_offsets[i + 1]] {
-                    let p = observations[o].point;
+                    let p = observations[o].point();
                     for &o2 in &point_obs[point_offsets[p]..point_offsets[p + 1]] {
-                        let j = observations[o2].camera;
+                        let j = observations[o2].camera();
                         if j > i {
                             cols.push(j);
                         }
@@ -243,6 +266,8 @@ impl Structure {
             point_obs,
             camera_offsets,
             camera_obs,
+            camera_priors,
+            prior_cameras,
             pattern: BlockPattern { row_offsets, cols },
         }
     }
@@ -257,16 +282,17 @@ impl Structure {
 }
 
 /// A weighted residual with its Jacobians and W = Jcᵀ·Jp.
-struct ObsLin<const C: usize> {
-    r: Vector2<f64>,
-    jc: SMatrix<f64, 2, C>,
-    jp: nalgebra::Matrix2x3<f64>,
+struct ObsLin<const C: usize, const R: usize> {
+    r: SVector<f64, R>,
+    jc: SMatrix<f64, R, C>,
+    jp: SMatrix<f64, R, 3>,
     w: SMatrix<f64, C, 3>,
 }
 
 /// The linearised normal equations at the current estimate.
-struct Normal<const C: usize> {
-    obs: Vec<ObsLin<C>>,
+struct Normal<const C: usize, const R: usize> {
+    obs: Vec<ObsLin<C, R>>,
+    priors: Vec<PriorLinearization<C>>,
     /// Per point: Vp = Σ Jpᵀ·Jp and gp = Σ Jpᵀ·r.
     points: Vec<(Matrix3<f64>, Vector3<f64>)>,
     /// Per camera: Ui = Σ Jcᵀ·Jc and gi = Σ Jcᵀ·r.
@@ -274,36 +300,43 @@ struct Normal<const C: usize> {
     gradient_max_norm: f64,
 }
 
-/// ½·Σρ(‖r‖²) over all observations, summed in observation order.
-fn total_cost<M: CameraModel<C>, const C: usize>(
+/// ½·Σρ(‖r‖²) over all observations plus ½·Σ‖r‖² over the priors, summed in a fixed order.
+fn total_cost<M: CameraModel<C, R>, const C: usize, const R: usize>(
     model: &M,
     loss: &RobustLoss,
     cameras: &[M::Camera],
     points: &[Vector3<f64>],
-    observations: &[Observation],
+    observations: &[M::Observation],
 ) -> f64 {
     let per_obs: Vec<f64> = observations
         .par_iter()
         .map(|o| {
-            let r = model.residual(&cameras[o.camera], &points[o.point], &o.pixel);
+            let r = model.residual(&cameras[o.camera()], &points[o.point()], o);
             0.5 * loss.rho(r.norm_squared())
         })
         .collect();
-    per_obs.iter().sum()
+    let priors: f64 = (0..model.num_priors())
+        .map(|k| 0.5 * model.linearize_prior(k, cameras).residual.norm_squared())
+        .sum();
+    per_obs.iter().sum::<f64>() + priors
 }
 
-fn linearize<M: CameraModel<C>, const C: usize>(
+fn linearize<M: CameraModel<C, R>, const C: usize, const R: usize>(
     model: &M,
     loss: &RobustLoss,
     structure: &Structure,
     cameras: &[M::Camera],
     points: &[Vector3<f64>],
-    observations: &[Observation],
-) -> Normal<C> {
-    let obs: Vec<ObsLin<C>> = observations
+    observations: &[M::Observation],
+) -> Normal<C, R> {
+    let priors: Vec<PriorLinearization<C>> = (0..model.num_priors())
+        .into_par_iter()
+        .map(|k| model.linearize_prior(k, cameras))
+        .collect();
+    let obs: Vec<ObsLin<C, R>> = observations
         .par_iter()
         .map(|o| {
-            let lin = model.linearize(&cameras[o.camera], &points[o.point], &o.pixel);
+            let lin = model.linearize(&cameras[o.camera()], &points[o.point()], o);
             let scale = loss.weight(lin.residual.norm_squared()).sqrt();
             let jc = lin.jacobian_camera * scale;
             let jp = lin.jacobian_point * scale;
@@ -336,6 +369,15 @@ fn linearize<M: CameraModel<C>, const C: usize>(
                 u += obs[o].jc.transpose() * obs[o].jc;
                 g += obs[o].jc.transpose() * obs[o].r;
             }
+            for &k in &structure.camera_priors[i] {
+                for (slot, cam) in structure.prior_cameras[k].iter().enumerate() {
+                    if *cam == Some(i) {
+                        let j = &priors[k].jacobians[slot];
+                        u += j.transpose() * j;
+                        g += j.transpose() * priors[k].residual;
+                    }
+                }
+            }
             (u, g)
         })
         .collect();
@@ -346,6 +388,7 @@ fn linearize<M: CameraModel<C>, const C: usize>(
         .fold(0.0, f64::max);
     Normal {
         obs,
+        priors,
         points: point_blocks,
         cameras: camera_blocks,
         gradient_max_norm,
@@ -369,11 +412,11 @@ fn damp<const N: usize>(m: &SMatrix<f64, N, N>, mu: f64, config: &LmConfig) -> S
     out
 }
 
-fn compute_step<const C: usize>(
-    normal: &Normal<C>,
+fn compute_step<O: Indexed + Sync, const C: usize, const R: usize>(
+    normal: &Normal<C, R>,
     structure: &Structure,
     solver: &ReducedSolver,
-    observations: &[Observation],
+    observations: &[O],
     mu: f64,
     config: &LmConfig,
 ) -> Option<Step<C>> {
@@ -388,7 +431,7 @@ fn compute_step<const C: usize>(
     let y: Vec<SMatrix<f64, C, 3>> = observations
         .par_iter()
         .zip(normal.obs.par_iter())
-        .map(|(o, lin)| lin.w * v_inv[o.point])
+        .map(|(o, lin)| lin.w * v_inv[o.point()])
         .collect();
     let pattern = &structure.pattern;
     // Reduced camera system, one task per block row.
@@ -400,11 +443,23 @@ fn compute_step<const C: usize>(
             let (u, g) = &normal.cameras[i];
             blocks[0] = damp(u, mu, config);
             let mut rhs = -g;
+            // Relative priors couple camera i with a camera j > i.
+            for &k in &structure.camera_priors[i] {
+                if let [Some(a), Some(b)] = structure.prior_cameras[k] {
+                    let (si, sj, j) = if a == i { (0, 1, b) } else { (1, 0, a) };
+                    if j > i
+                        && let Some(kb) = pattern.find(i, j)
+                    {
+                        let jac = &normal.priors[k].jacobians;
+                        blocks[kb] += jac[si].transpose() * jac[sj];
+                    }
+                }
+            }
             for &o in structure.obs_of_camera(i) {
-                let p = observations[o].point;
+                let p = observations[o].point();
                 rhs += y[o] * normal.points[p].1;
                 for &o2 in structure.obs_of_point(p) {
-                    let j = observations[o2].camera;
+                    let j = observations[o2].camera();
                     if j < i {
                         continue;
                     }
@@ -425,7 +480,7 @@ fn compute_step<const C: usize>(
         .map(|p| {
             let mut b = -normal.points[p].1;
             for &o in structure.obs_of_point(p) {
-                b -= normal.obs[o].w.transpose() * delta_cameras[observations[o].camera];
+                b -= normal.obs[o].w.transpose() * delta_cameras[observations[o].camera()];
             }
             v_inv[p] * b
         })
@@ -435,11 +490,25 @@ fn compute_step<const C: usize>(
         .par_iter()
         .zip(normal.obs.par_iter())
         .map(|(o, lin)| {
-            let jd = lin.jc * delta_cameras[o.camera] + lin.jp * delta_points[o.point];
+            let jd = lin.jc * delta_cameras[o.camera()] + lin.jp * delta_points[o.point()];
             -(lin.r.dot(&jd) + 0.5 * jd.norm_squared())
         })
         .collect();
-    let predicted_decrease = per_obs.iter().sum();
+    let prior_decrease: f64 = normal
+        .priors
+        .iter()
+        .zip(&structure.prior_cameras)
+        .map(|(lin, cams)| {
+            let mut jd = SVector::<f64, 6>::zeros();
+            for (slot, cam) in cams.iter().enumerate() {
+                if let Some(c) = cam {
+                    jd += lin.jacobians[slot] * delta_cameras[*c];
+                }
+            }
+            -(lin.residual.dot(&jd) + 0.5 * jd.norm_squared())
+        })
+        .sum();
+    let predicted_decrease = per_obs.iter().sum::<f64>() + prior_decrease;
     let norm = (delta_cameras.iter().map(|d| d.norm_squared()).sum::<f64>()
         + delta_points.iter().map(|d| d.norm_squared()).sum::<f64>())
     .sqrt();
@@ -452,27 +521,38 @@ fn compute_step<const C: usize>(
 }
 
 /// Checks indices and finiteness of a problem.
-fn validate_problem<M: CameraModel<C>, const C: usize>(
+fn validate_problem<M: CameraModel<C, R>, const C: usize, const R: usize>(
     model: &M,
     cameras: &[M::Camera],
     points: &[Vector3<f64>],
-    observations: &[Observation],
+    observations: &[M::Observation],
 ) -> Result<(), BaError> {
     for (k, o) in observations.iter().enumerate() {
-        if o.camera >= cameras.len() || o.point >= points.len() {
+        if o.camera() >= cameras.len() || o.point() >= points.len() {
             return Err(BaError::InvalidProblem {
                 reason: format!(
                     "observation {k} refers to camera {} and point {}, but there are {} cameras and {} points",
-                    o.camera,
-                    o.point,
+                    o.camera(),
+                    o.point(),
                     cameras.len(),
                     points.len()
                 ),
             });
         }
-        if !(o.pixel.x.is_finite() && o.pixel.y.is_finite()) {
+    }
+    for k in 0..model.num_priors() {
+        let cams = model.prior_cameras(k);
+        let valid = match cams {
+            [Some(a), None] | [None, Some(a)] => a < cameras.len(),
+            [Some(a), Some(b)] => a < cameras.len() && b < cameras.len() && a != b,
+            [None, None] => false,
+        };
+        if !valid {
             return Err(BaError::InvalidProblem {
-                reason: format!("observation {k} has a non-finite pixel"),
+                reason: format!(
+                    "prior {k} refers to cameras {cams:?}; it needs one camera or two distinct ones below {}",
+                    cameras.len()
+                ),
             });
         }
     }
@@ -499,16 +579,19 @@ fn validate_problem<M: CameraModel<C>, const C: usize>(
 /// indices or non-finite inputs; [`BaError::NonFiniteInitialCost`] when the start cannot be
 /// evaluated. A step the solver cannot take (not positive definite, non-finite cost) only
 /// shrinks the trust region.
-pub fn solve<M: CameraModel<C>, const C: usize>(
+pub fn solve<M: CameraModel<C, R>, const C: usize, const R: usize>(
     model: &M,
     cameras: &mut [M::Camera],
     points: &mut [Vector3<f64>],
-    observations: &[Observation],
+    observations: &[M::Observation],
     config: &LmConfig,
 ) -> Result<BaSummary, BaError> {
     config.validate()?;
     validate_problem(model, cameras, points, observations)?;
-    let structure = Structure::new(observations, cameras.len(), points.len());
+    let prior_cameras = (0..model.num_priors())
+        .map(|k| model.prior_cameras(k))
+        .collect();
+    let structure = Structure::new(observations, prior_cameras, cameras.len(), points.len());
     let solver =
         ReducedSolver::new::<C>(&structure.pattern, cameras.len(), config.dense_max_unknowns)
             .map_err(|e| BaError::InvalidProblem { reason: e.0 })?;
@@ -526,7 +609,7 @@ pub fn solve<M: CameraModel<C>, const C: usize>(
         termination: Termination::MaxIterations,
         linear_solver: solver.kind(),
     };
-    if observations.is_empty() || initial_cost == 0.0 {
+    if (observations.is_empty() && model.num_priors() == 0) || initial_cost == 0.0 {
         summary.termination = Termination::NothingToDo;
         return Ok(summary);
     }
