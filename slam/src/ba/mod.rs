@@ -30,7 +30,7 @@
 //! let mut cameras = cameras_truth.to_vec();
 //! let mut points = truth.to_vec();
 //! points[0].x += 0.05;
-//! // Keep the cameras fixed by solving only for points is not needed: LM finds zero cost.
+//! // Noise-free observations: the solver drives the cost to zero.
 //! let summary = solve(&SnavelyModel, &mut cameras, &mut points, &observations, &LmConfig::default()).unwrap();
 //! assert!(summary.final_cost < 1e-12 * summary.initial_cost.max(1.0));
 //! ```

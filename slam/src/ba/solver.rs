@@ -4,7 +4,7 @@
 //! camera blocks U_i of JᵀJ, damps both with μ·diag (μ = 1/trust-region radius, as Ceres), forms
 //! the reduced camera system S = U − W·V⁻¹·Wᵀ row by row (each camera row owned by one rayon task,
 //! summed in a fixed order, so results are identical for any thread count), solves it with faer
-//! (see [`super::linear`]), back-substitutes the point updates, and accepts the step when the
+//! (dense or sparse Cholesky), back-substitutes the point updates, and accepts the step when the
 //! actual cost decrease is a large enough fraction of the predicted one.
 
 use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
