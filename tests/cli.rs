@@ -1,4 +1,5 @@
-//! End-to-end tests of the `scarp` binary: world ground truth, sequence rendering, bad input.
+//! End-to-end tests of the `scarp` binary: world ground truth, sequence rendering, bundle
+//! adjustment of a BAL problem, bad input.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
