@@ -1,4 +1,5 @@
-//! End-to-end tests of the `scarp` binary: world ground truth, sequence rendering, bad input.
+//! End-to-end tests of the `scarp` binary: world ground truth, sequence rendering, bundle
+//! adjustment of a BAL problem, bad input.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -216,4 +217,43 @@ fn plan_flies_the_mapping_rings_of_a_target() {
         let stderr = String::from_utf8_lossy(&out.stderr);
         assert!(stderr.contains(needle), "{target}: {stderr}");
     }
+}
+
+#[test]
+fn ba_solves_the_shrunk_bal_problem_and_prints_json() {
+    let file = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("slam/tests/data/bal-ladybug-problem-49-7776-pre-shrink-1800.txt");
+    let out = scarp(&["ba", path_str(&file), "--threads", "2", "--json"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(json["cameras"], 49);
+    assert_eq!(json["points"], 1800);
+    assert_eq!(json["observations"], 10863);
+    let initial = json["initial_cost"].as_f64().unwrap();
+    let final_cost = json["final_cost"].as_f64().unwrap();
+    assert!((initial - 234519.80).abs() < 0.01, "{initial}");
+    assert!((final_cost - 3001.362).abs() < 3.0, "{final_cost}");
+    let costs = json["costs"].as_array().unwrap();
+    let iterations = json["iterations"].as_u64().unwrap() as usize;
+    assert_eq!(costs.len(), iterations + 1);
+    assert_eq!(costs.last().unwrap().as_f64().unwrap(), final_cost);
+    assert!(json["seconds"].as_f64().unwrap() > 0.0);
+}
+
+#[test]
+fn ba_rejects_a_malformed_file_naming_the_line() {
+    let dir = TempDir::new("ba-bad");
+    let file = dir.0.join("bad.txt");
+    std::fs::write(&file, "1 1 1\n0 0 nan 1\n0 0 0 0 0 -5 500 0 0\n0 0 1\n").unwrap();
+    let out = scarp(&["ba", path_str(&file), "--json"]);
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("bad.txt:2") && stderr.contains("not finite"),
+        "{stderr}"
+    );
 }

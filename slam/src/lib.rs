@@ -34,6 +34,7 @@
 // `!(x > 0.0)` is the NaN-rejecting form of `x <= 0.0`: bad input must fail the check.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod ba;
 pub mod error;
 pub mod frame;
 pub mod geometry;

@@ -1,6 +1,7 @@
 //! The `scarp` command line: one module per subcommand, each with its own clap `Args` struct and a
 //! `run` function.
 
+pub mod ba;
 pub mod config;
 pub mod eval;
 pub mod fragility;
@@ -29,6 +30,9 @@ pub struct Cli {
 /// The subcommands.
 #[derive(Debug, Subcommand)]
 pub enum Command {
+    /// Bundle-adjust a BAL problem (Levenberg–Marquardt, Schur complement) and report the cost
+    /// of every iteration.
+    Ba(ba::BaArgs),
     /// Fragility of a rock mesh: contact, mass properties, rocking angles α(θ), α_min and the
     /// toppling acceleration g·tan(α_min).
     Fragility(fragility::FragilityArgs),
@@ -58,6 +62,7 @@ pub enum Command {
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     init_logging(&cli.log);
     match cli.command {
+        Command::Ba(args) => ba::run(args),
         Command::Fragility(args) => fragility::run(args),
         Command::Simulate(args) => simulate::run(args),
         Command::Eval(args) => eval::run(args),
