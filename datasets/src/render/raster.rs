@@ -140,35 +140,37 @@ pub fn rasterize_tile(
         if u_lo > u_hi || v_lo > v_hi {
             continue;
         }
-        let edges = [
-            (s1, s2, is_top_left(s1, s2)),
-            (s2, s0, is_top_left(s2, s0)),
-            (s0, s1, is_top_left(s0, s1)),
-        ];
+        // Edge functions and 1/z are affine in (u, v): evaluate them at the first pixel, then
+        // step by their gradients along the row and down the rows.
+        let edges = [(s1, s2), (s2, s0), (s0, s1)];
+        let origin = [f64::from(u_lo), f64::from(v_lo)];
+        let start = edges.map(|(a, b)| edge(a, b, &origin));
+        let step_u = edges.map(|(a, b)| -(b[1] - a[1]));
+        let step_v = edges.map(|(a, b)| b[0] - a[0]);
+        let top_left = edges.map(|(a, b)| is_top_left(a, b));
         let inv_area = 1.0 / area;
+        let iz_of =
+            |w: [f64; 3]| (w[0] * t.inv_z[0] + w[1] * t.inv_z[1] + w[2] * t.inv_z[2]) * inv_area;
+        let (iz_start, iz_step_u, iz_step_v) = (iz_of(start), iz_of(step_u), iz_of(step_v));
         for v in v_lo..=v_hi {
+            let dv = f64::from(v - v_lo);
+            let mut w = [0, 1, 2].map(|k| start[k] + step_v[k] * dv);
+            let mut iz = iz_start + iz_step_v * dv;
+            let row = ((v - y0) * TILE_SIZE) as usize;
             for u in u_lo..=u_hi {
-                let p = [f64::from(u), f64::from(v)];
-                let mut w = [0.0; 3];
-                let mut covered = true;
-                for (k, (a, b, top_left)) in edges.iter().enumerate() {
-                    let e = edge(a, b, &p);
-                    if e < 0.0 || (e == 0.0 && !top_left) {
-                        covered = false;
-                        break;
+                let covered = (0..3).all(|k| w[k] > 0.0 || (w[k] == 0.0 && top_left[k]));
+                if covered {
+                    let slot = row + (u - x0) as usize;
+                    let depth_key = iz as f32;
+                    if depth_key > inv_depth[slot] {
+                        inv_depth[slot] = depth_key;
+                        winners[slot] = index;
                     }
-                    w[k] = e;
                 }
-                if !covered {
-                    continue;
+                for k in 0..3 {
+                    w[k] += step_u[k];
                 }
-                let iz =
-                    ((w[0] * t.inv_z[0] + w[1] * t.inv_z[1] + w[2] * t.inv_z[2]) * inv_area) as f32;
-                let slot = ((v - y0) * TILE_SIZE + (u - x0)) as usize;
-                if iz > inv_depth[slot] {
-                    inv_depth[slot] = iz;
-                    winners[slot] = index;
-                }
+                iz += iz_step_u;
             }
         }
     }
