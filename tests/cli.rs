@@ -1,24 +1,12 @@
 //! End-to-end tests of the `scarp` binary: world ground truth, sequence rendering, bundle
 //! adjustment of a BAL problem, bad input.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 
-struct TempDir(PathBuf);
-
-impl TempDir {
-    fn new(name: &str) -> Self {
-        let dir = std::env::temp_dir().join(format!("scarp-cli-{name}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
-        Self(dir)
-    }
-}
-
-impl Drop for TempDir {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
+/// A fresh temporary directory, removed when dropped.
+fn temp_dir() -> tempfile::TempDir {
+    tempfile::tempdir().expect("a temporary directory")
 }
 
 fn scarp(args: &[&str]) -> std::process::Output {
@@ -34,13 +22,13 @@ fn path_str(p: &Path) -> &str {
 
 #[test]
 fn world_writes_ground_truth_meshes_and_world_json() {
-    let dir = TempDir::new("world");
+    let dir = temp_dir();
     let out = scarp(&[
         "world",
         "--world",
         "default",
         "--out",
-        path_str(&dir.0),
+        path_str(dir.path()),
         "--json",
     ]);
     assert!(
@@ -49,7 +37,7 @@ fn world_writes_ground_truth_meshes_and_world_json() {
         String::from_utf8_lossy(&out.stderr)
     );
     let json: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(dir.0.join("world.json")).unwrap()).unwrap();
+        serde_json::from_slice(&std::fs::read(dir.path().join("world.json")).unwrap()).unwrap();
     let rocks = json["rocks"].as_array().unwrap();
     assert_eq!(rocks.iter().filter(|r| r["role"] == "target").count(), 3);
     assert!(rocks.iter().filter(|r| r["role"] == "distractor").count() >= 10);
@@ -57,7 +45,7 @@ fn world_writes_ground_truth_meshes_and_world_json() {
         assert_eq!(rock["centroid"].as_array().unwrap().len(), 3);
         assert!(rock["height_m"].as_f64().unwrap() > 0.3);
         let mesh =
-            scarp_export::ply::read_mesh(dir.0.join(rock["mesh"].as_str().unwrap())).unwrap();
+            scarp_export::ply::read_mesh(dir.path().join(rock["mesh"].as_str().unwrap())).unwrap();
         assert!(mesh.face_count() > 1000);
     }
     assert!(
@@ -66,7 +54,7 @@ fn world_writes_ground_truth_meshes_and_world_json() {
             .filter(|r| r["role"] == "target")
             .all(|r| r["contact"]["area_m2"].as_f64().unwrap() > 0.0)
     );
-    assert!(dir.0.join("terrain.ply").exists());
+    assert!(dir.path().join("terrain.ply").exists());
     // The printed JSON is the file's content.
     let printed: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(printed, json);
@@ -74,8 +62,8 @@ fn world_writes_ground_truth_meshes_and_world_json() {
 
 #[test]
 fn render_writes_a_tum_sequence_that_loads() {
-    let dir = TempDir::new("render");
-    let seq = dir.0.join("seq");
+    let dir = temp_dir();
+    let seq = dir.path().join("seq");
     let out = scarp(&[
         "render",
         "--path",
@@ -118,15 +106,15 @@ fn render_writes_a_tum_sequence_that_loads() {
 
 #[test]
 fn bad_input_fails_with_a_message_naming_the_culprit() {
-    let dir = TempDir::new("bad");
-    let world = dir.0.join("w.toml");
+    let dir = temp_dir();
+    let world = dir.path().join("w.toml");
     std::fs::write(&world, "[terrain.procedural]\nsize_m = 20.0\nsize = 3\n").unwrap();
     let out = scarp(&[
         "world",
         "--world",
         path_str(&world),
         "--out",
-        path_str(&dir.0.join("o")),
+        path_str(&dir.path().join("o")),
     ]);
     assert!(!out.status.success());
     let stderr = String::from_utf8_lossy(&out.stderr);
@@ -138,21 +126,21 @@ fn bad_input_fails_with_a_message_naming_the_culprit() {
     let out = scarp(&[
         "render",
         "--world",
-        path_str(&dir.0.join("missing.toml")),
+        path_str(&dir.path().join("missing.toml")),
         "--out",
-        path_str(&dir.0.join("s")),
+        path_str(&dir.path().join("s")),
     ]);
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("missing.toml"));
 
-    let path_file = dir.0.join("path.txt");
+    let path_file = dir.path().join("path.txt");
     std::fs::write(&path_file, "0 0 0 5 0 0 0 1\n0 1 0 5 0 0 0 1\n").unwrap();
     let out = scarp(&[
         "render",
         "--path",
         path_str(&path_file),
         "--out",
-        path_str(&dir.0.join("s")),
+        path_str(&dir.path().join("s")),
     ]);
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("path.txt:2"));
@@ -160,15 +148,22 @@ fn bad_input_fails_with_a_message_naming_the_culprit() {
 
 #[test]
 fn plan_flies_the_mapping_rings_of_a_target() {
-    let dir = TempDir::new("plan");
-    let out = scarp(&["plan", "--target", "2", "--out", path_str(&dir.0), "--json"]);
+    let dir = temp_dir();
+    let out = scarp(&[
+        "plan",
+        "--target",
+        "2",
+        "--out",
+        path_str(dir.path()),
+        "--json",
+    ]);
     assert!(
         out.status.success(),
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
     let flight: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(dir.0.join("flight.json")).unwrap()).unwrap();
+        serde_json::from_slice(&std::fs::read(dir.path().join("flight.json")).unwrap()).unwrap();
     for key in [
         "position_rms_m",
         "position_max_m",
@@ -193,10 +188,10 @@ fn plan_flies_the_mapping_rings_of_a_target() {
         "top.png",
         "side.png",
     ] {
-        assert!(dir.0.join(file).exists(), "{file}");
+        assert!(dir.path().join(file).exists(), "{file}");
     }
     assert!(
-        !scarp_export::tum::read_tum_trajectory(&dir.0.join("trajectory.txt"))
+        !scarp_export::tum::read_tum_trajectory(&dir.path().join("trajectory.txt"))
             .unwrap()
             .is_empty()
     );
@@ -211,7 +206,7 @@ fn plan_flies_the_mapping_rings_of_a_target() {
             "--target",
             target,
             "--out",
-            path_str(&dir.0.join("bad")),
+            path_str(&dir.path().join("bad")),
         ]);
         assert!(!out.status.success(), "{target}");
         let stderr = String::from_utf8_lossy(&out.stderr);
@@ -246,8 +241,8 @@ fn ba_solves_the_shrunk_bal_problem_and_prints_json() {
 
 #[test]
 fn ba_rejects_a_malformed_file_naming_the_line() {
-    let dir = TempDir::new("ba-bad");
-    let file = dir.0.join("bad.txt");
+    let dir = temp_dir();
+    let file = dir.path().join("bad.txt");
     std::fs::write(&file, "1 1 1\n0 0 nan 1\n0 0 0 0 0 -5 500 0 0\n0 0 1\n").unwrap();
     let out = scarp(&["ba", path_str(&file), "--json"]);
     assert!(!out.status.success());

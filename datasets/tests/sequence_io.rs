@@ -1,6 +1,6 @@
 //! Sequence round trips and bad-input handling.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use scarp_datasets::paths;
 use scarp_datasets::sequence::{RenderSettings, Sequence, write_sequence};
@@ -8,21 +8,9 @@ use scarp_datasets::world::World;
 use scarp_datasets::{estimator::EstimatorConfig, sensor::SensorConfig};
 use scarp_slam::PinholeCamera;
 
-struct TempDir(PathBuf);
-
-impl TempDir {
-    fn new(name: &str) -> Self {
-        let dir = std::env::temp_dir().join(format!("scarp-{name}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
-        Self(dir)
-    }
-}
-
-impl Drop for TempDir {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
+/// A fresh temporary directory, removed when dropped.
+fn temp_dir() -> tempfile::TempDir {
+    tempfile::tempdir().expect("a temporary directory")
 }
 
 fn small_world() -> World {
@@ -59,13 +47,13 @@ fn settings(noise: bool) -> RenderSettings {
 
 #[test]
 fn sequence_round_trip_is_exact() {
-    let dir = TempDir::new("roundtrip");
+    let dir = temp_dir();
     let world = small_world();
     let poses = paths::default_orbit(&world, 6).unwrap();
     let settings = settings(false);
-    let summary = write_sequence(&dir.0, &world, &poses, &settings, &|| {}).unwrap();
+    let summary = write_sequence(dir.path(), &world, &poses, &settings, &|| {}).unwrap();
     assert_eq!(summary.frames, 6);
-    let seq = Sequence::open(&dir.0).unwrap();
+    let seq = Sequence::open(dir.path()).unwrap();
     assert_eq!(seq.len(), 6);
     assert_eq!(seq.camera, settings.camera);
     assert!(seq.boxes.iter().any(|b| b.id == 4));
@@ -104,11 +92,11 @@ fn sequence_round_trip_is_exact() {
 
 #[test]
 fn noisy_sequences_are_deterministic() {
-    let (a, b) = (TempDir::new("det-a"), TempDir::new("det-b"));
+    let (a, b) = (temp_dir(), temp_dir());
     let world = small_world();
     let poses = paths::default_orbit(&world, 3).unwrap();
-    write_sequence(&a.0, &world, &poses, &settings(true), &|| {}).unwrap();
-    write_sequence(&b.0, &world, &poses, &settings(true), &|| {}).unwrap();
+    write_sequence(a.path(), &world, &poses, &settings(true), &|| {}).unwrap();
+    write_sequence(b.path(), &world, &poses, &settings(true), &|| {}).unwrap();
     for file in [
         "estimate.txt",
         "boxes.txt",
@@ -116,12 +104,12 @@ fn noisy_sequences_are_deterministic() {
         "rgb/0.100000.png",
     ] {
         assert_eq!(
-            std::fs::read(a.0.join(file)).unwrap(),
-            std::fs::read(b.0.join(file)).unwrap(),
+            std::fs::read(a.path().join(file)).unwrap(),
+            std::fs::read(b.path().join(file)).unwrap(),
             "{file}"
         );
     }
-    let seq = Sequence::open(&a.0).unwrap();
+    let seq = Sequence::open(a.path()).unwrap();
     let estimate = seq.entries[0].world_from_camera_estimate.unwrap();
     let truth = seq.entries[0].world_from_camera_truth.unwrap();
     assert!((estimate.translation.vector - truth.translation.vector).norm() > 1e-3);
@@ -142,18 +130,18 @@ fn expect_error(
 
 #[test]
 fn bad_input_gives_errors_that_name_the_culprit() {
-    let dir = TempDir::new("bad");
+    let dir = temp_dir();
     let world = small_world();
     let poses = paths::default_orbit(&world, 2).unwrap();
-    write_sequence(&dir.0, &world, &poses, &settings(false), &|| {}).unwrap();
+    write_sequence(dir.path(), &world, &poses, &settings(false), &|| {}).unwrap();
 
     // A missing file.
     expect_error(
-        Sequence::open(&dir.0.join("nowhere")),
+        Sequence::open(&dir.path().join("nowhere")),
         &["nowhere", "camera.toml"],
     );
     // A corrupt PNG.
-    let seq = Sequence::open(&dir.0).unwrap();
+    let seq = Sequence::open(dir.path()).unwrap();
     std::fs::write(&seq.entries[1].rgb_path, b"\x89PNG\r\n\x1a\nnot really").unwrap();
     expect_error(seq.load_frame(1), &["0.050000.png"]);
     // A depth PNG of the wrong kind (8-bit colour).
@@ -161,21 +149,21 @@ fn bad_input_gives_errors_that_name_the_culprit() {
     expect_error(seq.load_frame(0), &["depth", "16-bit"]);
     // Timestamps out of order.
     std::fs::write(
-        dir.0.join("depth.txt"),
+        dir.path().join("depth.txt"),
         "0.05 depth/0.050000.png\n0.0 depth/0.000000.png\n",
     )
     .unwrap();
-    expect_error(Sequence::open(&dir.0), &["depth.txt:2", "not after"]);
+    expect_error(Sequence::open(dir.path()), &["depth.txt:2", "not after"]);
     std::fs::write(
-        dir.0.join("groundtruth.txt"),
+        dir.path().join("groundtruth.txt"),
         "0 0 0 0 0 0 0 1\n0 1 0 0 0 0 0 1\n",
     )
     .unwrap();
-    std::fs::write(dir.0.join("depth.txt"), "0.0 depth/0.000000.png\n").unwrap();
-    expect_error(Sequence::open(&dir.0), &["groundtruth.txt:2"]);
+    std::fs::write(dir.path().join("depth.txt"), "0.0 depth/0.000000.png\n").unwrap();
+    expect_error(Sequence::open(dir.path()), &["groundtruth.txt:2"]);
     // An unknown key in camera.toml and in a world file.
-    std::fs::write(dir.0.join("camera.toml"), "fx = 1.0\nfy = 1.0\ncx = 0.0\ncy = 0.0\nwidth = 2\nheight = 2\ndepth_scale = 5000.0\nfocal = 3\n").unwrap();
-    expect_error(Sequence::open(&dir.0), &["camera.toml", "focal"]);
+    std::fs::write(dir.path().join("camera.toml"), "fx = 1.0\nfy = 1.0\ncx = 0.0\ncy = 0.0\nwidth = 2\nheight = 2\ndepth_scale = 5000.0\nfocal = 3\n").unwrap();
+    expect_error(Sequence::open(dir.path()), &["camera.toml", "focal"]);
     expect_error(
         World::from_toml_str(
             "[terrain.procedural]\nsize_m = 10.0\nroughnes_m = 1.0\n",
@@ -186,19 +174,22 @@ fn bad_input_gives_errors_that_name_the_culprit() {
     );
     // A truncated PLY rock mesh.
     let full = scarp_datasets::world::DOUBLE_ROCK_PLY;
-    std::fs::write(dir.0.join("rock.ply"), &full[..full.len() / 2]).unwrap();
+    std::fs::write(dir.path().join("rock.ply"), &full[..full.len() / 2]).unwrap();
     let world_text = "[terrain.procedural]\nsize_m = 10.0\n[[rocks]]\nid = 1\nrole = \"target\"\nposition_m = [0.0, 0.0]\nheight_m = 1.0\nshape = { mesh = \"rock.ply\" }\n";
     expect_error(
-        World::from_toml_str(world_text, Path::new("w.toml"), &dir.0),
+        World::from_toml_str(world_text, Path::new("w.toml"), dir.path()),
         &["rock.ply"],
     );
     // A missing rock mesh, and a missing world file.
-    std::fs::remove_file(dir.0.join("rock.ply")).unwrap();
+    std::fs::remove_file(dir.path().join("rock.ply")).unwrap();
     expect_error(
-        World::from_toml_str(world_text, Path::new("w.toml"), &dir.0),
+        World::from_toml_str(world_text, Path::new("w.toml"), dir.path()),
         &["rock.ply"],
     );
-    expect_error(World::load(&dir.0.join("absent.toml")), &["absent.toml"]);
+    expect_error(
+        World::load(&dir.path().join("absent.toml")),
+        &["absent.toml"],
+    );
     // A rock outside the terrain names its key.
     expect_error(
         World::from_toml_str(
@@ -206,7 +197,7 @@ fn bad_input_gives_errors_that_name_the_culprit() {
                 .replace("[0.0, 0.0]", "[90.0, 0.0]")
                 .replace("rock.ply", "builtin:double_rock"),
             Path::new("w.toml"),
-            &dir.0,
+            dir.path(),
         ),
         &["rocks[0].position_m"],
     );
@@ -214,33 +205,33 @@ fn bad_input_gives_errors_that_name_the_culprit() {
 
 #[test]
 fn real_tum_style_sequences_load() {
-    let dir = TempDir::new("tumstyle");
+    let dir = temp_dir();
     let world = small_world();
     let poses = paths::default_orbit(&world, 3).unwrap();
-    write_sequence(&dir.0, &world, &poses, &settings(false), &|| {}).unwrap();
+    write_sequence(dir.path(), &world, &poses, &settings(false), &|| {}).unwrap();
     // A real sequence has no estimate, boxes or masks, depth stamped apart from colour, a
     // denser ground truth, and sometimes a negative fy.
     for extra in ["estimate.txt", "boxes.txt"] {
-        std::fs::remove_file(dir.0.join(extra)).unwrap();
+        std::fs::remove_file(dir.path().join(extra)).unwrap();
     }
-    std::fs::remove_dir_all(dir.0.join("mask")).unwrap();
-    let camera = std::fs::read_to_string(dir.0.join("camera.toml")).unwrap();
+    std::fs::remove_dir_all(dir.path().join("mask")).unwrap();
+    let camera = std::fs::read_to_string(dir.path().join("camera.toml")).unwrap();
     let fy_line = camera
         .lines()
         .find(|l| l.starts_with("fy"))
         .unwrap()
         .to_string();
     std::fs::write(
-        dir.0.join("camera.toml"),
+        dir.path().join("camera.toml"),
         camera.replace(&fy_line, &fy_line.replace("= ", "= -")),
     )
     .unwrap();
     std::fs::write(
-        dir.0.join("depth.txt"),
+        dir.path().join("depth.txt"),
         "0.012 depth/0.000000.png\n0.065 depth/0.050000.png\n0.1001 depth/0.100000.png\n",
     )
     .unwrap();
-    let seq = Sequence::open(&dir.0).unwrap();
+    let seq = Sequence::open(dir.path()).unwrap();
     assert!(seq.camera.fy < 0.0);
     // 0.065 is 0.015 s from 0.05 (kept); the first pair is 0.012 s apart (kept).
     assert_eq!(seq.len(), 3);
@@ -253,11 +244,11 @@ fn real_tum_style_sequences_load() {
     assert!(seq.load_frame(1).unwrap().instance_mask.is_none());
     // Depth more than 0.02 s away is not associated.
     std::fs::write(
-        dir.0.join("depth.txt"),
+        dir.path().join("depth.txt"),
         "0.028 depth/0.000000.png\n0.076 depth/0.050000.png\n0.1001 depth/0.100000.png\n",
     )
     .unwrap();
-    let seq = Sequence::open(&dir.0).unwrap();
+    let seq = Sequence::open(dir.path()).unwrap();
     assert_eq!(
         seq.entries
             .iter()
