@@ -16,17 +16,7 @@ pub fn derive_seed(seed: u64, index: u64) -> u64 {
     mix64(seed ^ mix64(index.wrapping_add(0x9e37_79b9_7f4a_7c15)))
 }
 
-/// `x.floor()` as an integer, without the libm call that `f64::floor` becomes on baseline
-/// x86-64 (it dominated world building). Exact for |x| < 2^53.
-#[inline]
-pub fn floor_i64(x: f64) -> i64 {
-    let truncated = x as i64;
-    if (truncated as f64) > x {
-        truncated - 1
-    } else {
-        truncated
-    }
-}
+pub use scarp_slam::geometry::floor_i64;
 
 fn lattice(seed: u64, x: i64, y: i64, z: i64) -> f32 {
     let h = mix64(
@@ -122,24 +112,6 @@ pub fn fbm_3d(seed: u64, x: f64, y: f64, z: f64, wavelength: f64, octaves: u32) 
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn fast_floor_matches_floor() {
-        for x in [
-            -2.5,
-            -2.0,
-            -1e-9,
-            0.0,
-            1e-9,
-            0.999,
-            1.0,
-            7.5,
-            -1e12 - 0.5,
-            3e15,
-        ] {
-            assert_eq!(floor_i64(x), x.floor() as i64, "{x}");
-        }
-    }
 
     #[test]
     fn noise_is_bounded_deterministic_and_continuous() {

@@ -1,11 +1,13 @@
 //! Cameras and rigid transforms.
 
 mod camera;
+mod floor;
 mod polygon;
 mod transform;
 mod triangle;
 
 pub use camera::PinholeCamera;
+pub use floor::{floor_i32, floor_i64};
 pub use polygon::{convex_hull_2d, polygon_signed_area};
 pub use transform::{
     check_finite_isometry, isometry_from_tum, look_at, quaternion_from_xyzw, rotation_angle_deg,

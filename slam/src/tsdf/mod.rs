@@ -347,9 +347,8 @@ impl TsdfVolume {
     pub fn tsdf_at(&self, p: &Point3<f32>, min_weight: f32) -> Option<f32> {
         let s = self.config.voxel_size_m;
         let g = [p.x / s, p.y / s, p.z / s];
-        let base = [g[0].floor(), g[1].floor(), g[2].floor()];
-        let f = [g[0] - base[0], g[1] - base[1], g[2] - base[2]];
-        let b = [base[0] as i32, base[1] as i32, base[2] as i32];
+        let b = g.map(crate::geometry::floor_i32);
+        let f = [0, 1, 2].map(|k| g[k] - b[k] as f32);
         let mut acc = 0.0;
         for c in 0..8 {
             let o = [c & 1, (c >> 1) & 1, (c >> 2) & 1];
