@@ -16,6 +16,22 @@ fn scarp(args: &[&str]) -> std::process::Output {
         .expect("the scarp binary runs")
 }
 
+/// Runs `scarp` and fails the test, showing its stderr, unless it succeeds.
+fn scarp_ok(args: &[&str]) -> std::process::Output {
+    let out = scarp(args);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
+/// Reads a JSON file the binary wrote.
+fn read_json(path: &Path) -> serde_json::Value {
+    serde_json::from_slice(&std::fs::read(path).unwrap()).unwrap()
+}
+
 fn path_str(p: &Path) -> &str {
     p.to_str().unwrap()
 }
@@ -23,7 +39,7 @@ fn path_str(p: &Path) -> &str {
 #[test]
 fn world_writes_ground_truth_meshes_and_world_json() {
     let dir = temp_dir();
-    let out = scarp(&[
+    let out = scarp_ok(&[
         "world",
         "--world",
         "default",
@@ -31,13 +47,7 @@ fn world_writes_ground_truth_meshes_and_world_json() {
         path_str(dir.path()),
         "--json",
     ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let json: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(dir.path().join("world.json")).unwrap()).unwrap();
+    let json: serde_json::Value = read_json(&dir.path().join("world.json"));
     let rocks = json["rocks"].as_array().unwrap();
     assert_eq!(rocks.iter().filter(|r| r["role"] == "target").count(), 3);
     assert!(rocks.iter().filter(|r| r["role"] == "distractor").count() >= 10);
@@ -64,7 +74,7 @@ fn world_writes_ground_truth_meshes_and_world_json() {
 fn render_writes_a_tum_sequence_that_loads() {
     let dir = temp_dir();
     let seq = dir.path().join("seq");
-    let out = scarp(&[
+    let out = scarp_ok(&[
         "render",
         "--path",
         "orbit",
@@ -76,11 +86,6 @@ fn render_writes_a_tum_sequence_that_loads() {
         "3",
         "--json",
     ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
     let summary: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(summary["frames"], 4);
     for file in [
@@ -149,7 +154,7 @@ fn bad_input_fails_with_a_message_naming_the_culprit() {
 #[test]
 fn plan_flies_the_mapping_rings_of_a_target() {
     let dir = temp_dir();
-    let out = scarp(&[
+    scarp_ok(&[
         "plan",
         "--target",
         "2",
@@ -157,13 +162,7 @@ fn plan_flies_the_mapping_rings_of_a_target() {
         path_str(dir.path()),
         "--json",
     ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let flight: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(dir.path().join("flight.json")).unwrap()).unwrap();
+    let flight: serde_json::Value = read_json(&dir.path().join("flight.json"));
     for key in [
         "position_rms_m",
         "position_max_m",
@@ -218,12 +217,7 @@ fn plan_flies_the_mapping_rings_of_a_target() {
 fn ba_solves_the_shrunk_bal_problem_and_prints_json() {
     let file = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("slam/tests/data/bal-ladybug-problem-49-7776-pre-shrink-1800.txt");
-    let out = scarp(&["ba", path_str(&file), "--threads", "2", "--json"]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let out = scarp_ok(&["ba", path_str(&file), "--threads", "2", "--json"]);
     let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(json["cameras"], 49);
     assert_eq!(json["points"], 1800);

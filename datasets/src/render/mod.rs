@@ -190,16 +190,15 @@ impl<'w> Renderer<'w> {
         lo: &Point3<f64>,
         hi: &Point3<f64>,
     ) -> bool {
-        let corners: Vec<Point3<f64>> = (0..8)
-            .map(|i| {
-                camera_from_world
-                    * Point3::new(
-                        if i & 1 == 0 { lo.x } else { hi.x },
-                        if i & 2 == 0 { lo.y } else { hi.y },
-                        if i & 4 == 0 { lo.z } else { hi.z },
-                    )
-            })
-            .collect();
+        // Runs for every chunk of every frame: a fixed array, no allocation.
+        let corners: [Point3<f64>; 8] = std::array::from_fn(|i| {
+            camera_from_world
+                * Point3::new(
+                    if i & 1 == 0 { lo.x } else { hi.x },
+                    if i & 2 == 0 { lo.y } else { hi.y },
+                    if i & 4 == 0 { lo.z } else { hi.z },
+                )
+        });
         let (w, h) = (f64::from(camera.width), f64::from(camera.height));
         // Frustum half-spaces in homogeneous form (valid for any sign of fy).
         let planes: [FrustumPlane; 5] = [
