@@ -6,5 +6,6 @@
 //! [`scarp_export`] and synthetic worlds in [`scarp_datasets`].
 
 pub mod cli;
+pub mod detection;
 pub mod evaluation;
 pub mod fragility;
