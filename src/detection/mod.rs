@@ -38,7 +38,7 @@ impl BoundingBox {
             y_max,
         };
         let finite = [x_min, y_min, x_max, y_max].iter().all(|v| v.is_finite());
-        if !finite || !(x_min < x_max) || !(y_min < y_max) {
+        if !finite || x_min >= x_max || y_min >= y_max {
             return Err(DetectionError::InvalidBox { bbox: b });
         }
         Ok(b)
