@@ -78,64 +78,92 @@ impl GaussMarkov {
 impl EstimatorConfig {
     /// The estimated poses for a true trajectory (same timestamps), from seed `seed`.
     pub fn estimate(&self, truth: &[StampedPose], seed: u64) -> Vec<StampedPose> {
-        let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
-        let mut walks = [
-            GaussMarkov::new(
-                self.horizontal_sigma_m,
-                self.position_correlation_s,
-                &mut rng,
-            ),
-            GaussMarkov::new(
-                self.horizontal_sigma_m,
-                self.position_correlation_s,
-                &mut rng,
-            ),
-            GaussMarkov::new(self.vertical_sigma_m, self.position_correlation_s, &mut rng),
-            GaussMarkov::new(
-                self.roll_pitch_sigma_deg.to_radians(),
-                self.attitude_correlation_s,
-                &mut rng,
-            ),
-            GaussMarkov::new(
-                self.roll_pitch_sigma_deg.to_radians(),
-                self.attitude_correlation_s,
-                &mut rng,
-            ),
-            GaussMarkov::new(
-                self.yaw_sigma_deg.to_radians(),
-                self.attitude_correlation_s,
-                &mut rng,
-            ),
-        ];
-        let white = [
-            self.horizontal_white_m,
-            self.horizontal_white_m,
-            self.vertical_white_m,
-        ];
-        let mut previous_t = truth.first().map_or(0.0, |p| p.timestamp_s);
+        let mut estimator = StateEstimator::new(self, seed);
         truth
             .iter()
-            .map(|pose| {
-                let dt = pose.timestamp_s - previous_t;
-                previous_t = pose.timestamp_s;
-                let e: Vec<f64> = walks.iter_mut().map(|w| w.step(dt, &mut rng)).collect();
-                let noise: [f64; 3] = std::array::from_fn(|k| {
-                    let draw: f64 = StandardNormal.sample(&mut rng);
-                    white[k] * draw
-                });
-                let position_error =
-                    Vector3::new(e[0] + noise[0], e[1] + noise[1], e[2] + noise[2]);
-                let attitude_error = UnitQuaternion::from_euler_angles(e[3], e[4], e[5]);
-                let truth_pose = pose.world_from_camera;
-                StampedPose {
-                    timestamp_s: pose.timestamp_s,
-                    world_from_camera: Isometry3::from_parts(
-                        Translation3::from(truth_pose.translation.vector + position_error),
-                        attitude_error * truth_pose.rotation,
-                    ),
-                }
+            .map(|pose| StampedPose {
+                timestamp_s: pose.timestamp_s,
+                world_from_camera: estimator.observe(pose.timestamp_s, &pose.world_from_camera),
             })
             .collect()
+    }
+}
+
+/// The estimator as a running process: feed it true poses in time order and it returns what the
+/// GPS/IMU filter would report. [`EstimatorConfig::estimate`] is this applied to a whole
+/// trajectory, so a closed-loop simulation that calls [`StateEstimator::observe`] at its camera
+/// times gets the same errors as a rendered sequence with the same timestamps and seed.
+#[derive(Debug, Clone)]
+pub struct StateEstimator {
+    rng: Xoshiro256PlusPlus,
+    /// x, y, z position walks, then roll, pitch, yaw.
+    walks: [GaussMarkov; 6],
+    white_m: [f64; 3],
+    previous_t: Option<f64>,
+}
+
+impl StateEstimator {
+    /// A new process with its stationary initial error drawn from `seed`.
+    pub fn new(cfg: &EstimatorConfig, seed: u64) -> Self {
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
+        let mut walk = |sigma: f64, tau_s: f64| GaussMarkov::new(sigma, tau_s, &mut rng);
+        let walks = [
+            walk(cfg.horizontal_sigma_m, cfg.position_correlation_s),
+            walk(cfg.horizontal_sigma_m, cfg.position_correlation_s),
+            walk(cfg.vertical_sigma_m, cfg.position_correlation_s),
+            walk(
+                cfg.roll_pitch_sigma_deg.to_radians(),
+                cfg.attitude_correlation_s,
+            ),
+            walk(
+                cfg.roll_pitch_sigma_deg.to_radians(),
+                cfg.attitude_correlation_s,
+            ),
+            walk(cfg.yaw_sigma_deg.to_radians(), cfg.attitude_correlation_s),
+        ];
+        Self {
+            rng,
+            walks,
+            white_m: [
+                cfg.horizontal_white_m,
+                cfg.horizontal_white_m,
+                cfg.vertical_white_m,
+            ],
+            previous_t: None,
+        }
+    }
+
+    /// The slowly varying part of the position error now (metres, world ENU): the GPS walk
+    /// without the white noise. A controller flying on the estimate sits off the truth by this.
+    pub fn position_drift_m(&self) -> Vector3<f64> {
+        Vector3::new(
+            self.walks[0].value,
+            self.walks[1].value,
+            self.walks[2].value,
+        )
+    }
+
+    /// Advances the error processes to `timestamp_s` and returns the estimate of the true
+    /// `world_from_camera`. Times must not decrease; a repeated or earlier time advances by 0 s.
+    pub fn observe(
+        &mut self,
+        timestamp_s: f64,
+        world_from_camera: &Isometry3<f64>,
+    ) -> Isometry3<f64> {
+        let dt = self.previous_t.map_or(0.0, |t| timestamp_s - t);
+        self.previous_t = Some(timestamp_s);
+        let rng = &mut self.rng;
+        let e: [f64; 6] = std::array::from_fn(|k| self.walks[k].step(dt, rng));
+        let noise: [f64; 3] = std::array::from_fn(|k| {
+            let draw: f64 = StandardNormal.sample(rng);
+            self.white_m[k] * draw
+        });
+        let position_error = Vector3::new(e[0] + noise[0], e[1] + noise[1], e[2] + noise[2]);
+        let attitude_error = UnitQuaternion::from_euler_angles(e[3], e[4], e[5]);
+        Isometry3::from_parts(
+            Translation3::from(world_from_camera.translation.vector + position_error),
+            attitude_error * world_from_camera.rotation,
+        )
     }
 }
 

@@ -1,0 +1,166 @@
+//! How much of a target's bounding cylinder the mapping flight has seen: the test that ends
+//! mapping (DESIGN: mapping success is decided by coverage, not by whether the map has points).
+//!
+//! The cylinder's side is cut into azimuth × height cells. A cell counts as seen once a frame
+//! sees its centre inside the image, within the depth range, at an incidence angle (between the
+//! cell's outward normal and the ray back to the camera) no steeper than the limit. The bottom
+//! band is what shows the rock's base, so it is a band like any other: a flight that only
+//! passes overhead cannot cover it.
+
+use nalgebra::{Isometry3, Point3, Vector3};
+use scarp_planning::prelude::VerticalCylinder;
+use scarp_slam::PinholeCamera;
+use serde::{Deserialize, Serialize};
+
+/// Cells and acceptance limits of the coverage test.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct CoverageConfig {
+    /// Cells around the cylinder. Default 24 (15° each).
+    pub azimuth_cells: usize,
+    /// Cells from bottom to top. Default 6.
+    pub height_cells: usize,
+    /// Mapping is complete once this fraction of cells is seen. Default 0.9.
+    pub threshold: f64,
+    /// Steepest accepted incidence, degrees from the cell normal. Default 75.
+    pub max_incidence_deg: f64,
+    /// Farthest accepted depth along the camera z axis, metres. Default 6.
+    pub max_depth_m: f64,
+}
+
+impl Default for CoverageConfig {
+    fn default() -> Self {
+        Self {
+            azimuth_cells: 24,
+            height_cells: 6,
+            threshold: 0.9,
+            max_incidence_deg: 75.0,
+            max_depth_m: 6.0,
+        }
+    }
+}
+
+/// Seen/unseen state of every cell of one cylinder.
+#[derive(Debug, Clone)]
+pub struct CylinderCoverage {
+    config: CoverageConfig,
+    /// Centre and outward unit normal of each cell, azimuth-major.
+    cells: Vec<(Point3<f64>, Vector3<f64>)>,
+    seen: Vec<bool>,
+}
+
+impl CylinderCoverage {
+    /// All cells of `cylinder` unseen. Zero cell counts are raised to one.
+    pub fn new(cylinder: &VerticalCylinder, config: CoverageConfig) -> Self {
+        let (na, nh) = (config.azimuth_cells.max(1), config.height_cells.max(1));
+        let mut cells = Vec::with_capacity(na * nh);
+        for a in 0..na {
+            let az = (a as f64 + 0.5) / na as f64 * std::f64::consts::TAU;
+            let normal = Vector3::new(az.cos(), az.sin(), 0.0);
+            for h in 0..nh {
+                let z = cylinder.z_bottom_m + (h as f64 + 0.5) / nh as f64 * cylinder.height_m();
+                let center = cylinder.axis_point(z) + normal * cylinder.radius_m;
+                cells.push((center, normal));
+            }
+        }
+        Self {
+            config,
+            seen: vec![false; cells.len()],
+            cells,
+        }
+    }
+
+    /// Marks the cells that a camera at `world_from_camera` sees.
+    pub fn observe(&mut self, camera: &PinholeCamera, world_from_camera: &Isometry3<f64>) {
+        let camera_from_world = world_from_camera.inverse();
+        let eye = world_from_camera.translation.vector;
+        let cos_limit = self.config.max_incidence_deg.to_radians().cos();
+        for ((center, normal), seen) in self.cells.iter().zip(self.seen.iter_mut()) {
+            if *seen {
+                continue;
+            }
+            let to_eye = eye - center.coords;
+            let distance = to_eye.norm();
+            if distance <= 0.0 || normal.dot(&to_eye) / distance < cos_limit {
+                continue;
+            }
+            let p = camera_from_world * center;
+            if p.z > self.config.max_depth_m {
+                continue;
+            }
+            if camera
+                .project(&p)
+                .is_some_and(|px| camera.in_bounds(&px, 0.0))
+            {
+                *seen = true;
+            }
+        }
+    }
+
+    /// Fraction of cells seen, in `[0, 1]`.
+    pub fn fraction(&self) -> f64 {
+        self.seen.iter().filter(|&&s| s).count() as f64 / self.seen.len() as f64
+    }
+
+    /// Fraction of the bottom band's cells seen: how well the base was viewed.
+    pub fn bottom_fraction(&self) -> f64 {
+        let nh = self.config.height_cells.max(1);
+        let bottom: Vec<bool> = self.seen.iter().step_by(nh).copied().collect();
+        bottom.iter().filter(|&&s| s).count() as f64 / bottom.len() as f64
+    }
+
+    /// Whether the seen fraction reached the threshold.
+    pub fn is_complete(&self) -> bool {
+        self.fraction() >= self.config.threshold
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use scarp_slam::geometry::look_at;
+
+    fn cylinder() -> VerticalCylinder {
+        VerticalCylinder::new(0.0, 0.0, 1.0, 0.0, 2.0).unwrap()
+    }
+
+    #[test]
+    fn one_side_view_sees_about_a_third() {
+        let camera = PinholeCamera::from_hfov(640, 480, 80.0).unwrap();
+        let mut coverage = CylinderCoverage::new(&cylinder(), CoverageConfig::default());
+        let pose = look_at(
+            &Point3::new(4.0, 0.0, 1.0),
+            &Point3::new(0.0, 0.0, 1.0),
+            &Vector3::z(),
+        )
+        .unwrap();
+        coverage.observe(&camera, &pose);
+        let f = coverage.fraction();
+        // ±75° about the facing azimuth is 150° of 360°, minus what perspective hides.
+        assert!(f > 0.25 && f < 0.45, "fraction {f}");
+        assert!(!coverage.is_complete());
+    }
+
+    #[test]
+    fn a_ring_of_views_completes_it_and_overhead_views_do_not() {
+        let camera = PinholeCamera::from_hfov(640, 480, 80.0).unwrap();
+        let mut ring = CylinderCoverage::new(&cylinder(), CoverageConfig::default());
+        let mut overhead = ring.clone();
+        for k in 0..12 {
+            let az = f64::from(k) / 12.0 * std::f64::consts::TAU;
+            let eye = Point3::new(4.0 * az.cos(), 4.0 * az.sin(), 1.5);
+            ring.observe(
+                &camera,
+                &look_at(&eye, &Point3::new(0.0, 0.0, 1.0), &Vector3::z()).unwrap(),
+            );
+            let high = Point3::new(0.5 * az.cos(), 0.5 * az.sin(), 5.5);
+            overhead.observe(
+                &camera,
+                &look_at(&high, &Point3::new(0.0, 0.0, 1.0), &Vector3::y()).unwrap(),
+            );
+        }
+        assert!(ring.is_complete(), "ring {}", ring.fraction());
+        assert_eq!(ring.bottom_fraction(), 1.0);
+        assert_eq!(overhead.fraction(), 0.0, "overhead views graze the side");
+    }
+}
