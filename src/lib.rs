@@ -5,6 +5,9 @@
 //! Geometry and mapping live in [`scarp_slam`], motion in [`scarp_planning`], file formats in
 //! [`scarp_export`] and synthetic worlds in [`scarp_datasets`].
 
+// `!(x > 0.0)` is the NaN-rejecting form of `x <= 0.0`: bad input must fail the check.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 pub mod cli;
 pub mod detection;
 pub mod evaluation;

@@ -1,7 +1,19 @@
 //! The closed-loop mission: Search → FineLocalize → Map → Search, for every target.
 //!
+//! - [`config`]: every tunable of a mission (`mission.toml`).
 //! - [`motion`]: the one motion system (min-snap trajectories flown by the geometric controller
 //!   on the quadrotor model) that every mode uses.
+//! - [`mode`]: the modes and the flight log.
+//! - [`catalog`]: the mission's targets and their status.
 //! - [`coverage`]: the cylinder-coverage test that ends mapping.
+//! - [`evaluation`]: matching targets to the ground truth.
+//! - [`report`]: `mission.json`, `targets.geojson`, `targets.csv`.
+//! - [`html`]: `report.html` and its pictures.
+pub mod catalog;
+pub mod config;
 pub mod coverage;
+pub mod evaluation;
+pub mod html;
+pub mod mode;
 pub mod motion;
+pub mod report;

@@ -1,0 +1,135 @@
+//! The mission's target catalog: every target the localization filter registered, with its
+//! mission status, the cylinder flown around it and its report row. Keyed by the localization
+//! target id, ordered, so iteration (and thus the run) is deterministic.
+
+use std::collections::BTreeMap;
+
+use nalgebra::Point3;
+use scarp_planning::prelude::VerticalCylinder;
+use serde::{Deserialize, Serialize};
+
+use super::report::TargetReport;
+
+/// Where a target is in the mission.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TargetStatus {
+    /// Seen and being localized during the search.
+    Localizing,
+    /// The fine-localization circle is being flown.
+    FineLocalizing,
+    /// Localized; waiting to be mapped.
+    Localized,
+    /// The mapping rings are being flown.
+    Mapping,
+    /// Mapped, meshed and analysed.
+    Mapped,
+    /// Mapping ended with too little coverage, or the mesh could not be analysed.
+    Incomplete,
+    /// The fine-localization circle ended without convergence.
+    Unconverged,
+    /// The planner could not reach it safely.
+    Unreachable,
+}
+
+impl TargetStatus {
+    /// The status as written in files.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Localizing => "localizing",
+            Self::FineLocalizing => "fine_localizing",
+            Self::Localized => "localized",
+            Self::Mapping => "mapping",
+            Self::Mapped => "mapped",
+            Self::Incomplete => "incomplete",
+            Self::Unconverged => "unconverged",
+            Self::Unreachable => "unreachable",
+        }
+    }
+}
+
+/// A target as the mission sees it.
+#[derive(Debug, Clone)]
+pub struct MissionTarget {
+    /// Mission status.
+    pub status: TargetStatus,
+    /// The cylinder flown around it, once planned.
+    pub cylinder: Option<VerticalCylinder>,
+    /// Horizontal covariance of its localization points `[σxx, σxy, σyy]`, m².
+    pub covariance_xy: Option<[f64; 3]>,
+    /// The report row.
+    pub report: TargetReport,
+}
+
+impl MissionTarget {
+    /// A newly registered target at `center`, found at mission time `time_s`.
+    pub fn new(id: u32, center: &Point3<f64>, time_s: f64) -> Self {
+        Self {
+            status: TargetStatus::Localizing,
+            cylinder: None,
+            covariance_xy: None,
+            report: TargetReport {
+                id: u64::from(id),
+                status: TargetStatus::Localizing.as_str().into(),
+                center: center.coords.into(),
+                found_at_s: time_s,
+                ..TargetReport::default()
+            },
+        }
+    }
+
+    /// Sets the status in both places it is kept.
+    pub fn set_status(&mut self, status: TargetStatus) {
+        self.status = status;
+        self.report.status = status.as_str().into();
+    }
+
+    /// Whether the mission is done with it (mapped or given up): it is skipped from now on.
+    pub fn is_finished(&self) -> bool {
+        !matches!(
+            self.status,
+            TargetStatus::Localizing | TargetStatus::FineLocalizing | TargetStatus::Mapping
+        )
+    }
+}
+
+/// The catalog: mission targets by localization id.
+pub type Catalog = BTreeMap<u32, MissionTarget>;
+
+/// Whether `center` lies within an already handled target's footprint (its cylinder radius, at
+/// least `min_distance_m`): a re-registration of a rock the mission is done with.
+pub fn is_already_handled(catalog: &Catalog, center: &Point3<f64>, min_distance_m: f64) -> bool {
+    catalog.values().any(|m| {
+        m.status != TargetStatus::Localizing
+            && (Point3::from(m.report.center) - center).norm()
+                < m.report.cylinder_radius_m.max(min_distance_m)
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn handled_targets_are_skipped_and_new_ones_are_not() {
+        let mut catalog = Catalog::new();
+        let mut mapped = MissionTarget::new(1, &Point3::new(0.0, 0.0, 1.0), 3.0);
+        mapped.set_status(TargetStatus::Mapped);
+        mapped.report.cylinder_radius_m = 1.5;
+        assert!(mapped.is_finished());
+        catalog.insert(1, mapped);
+        assert!(is_already_handled(
+            &catalog,
+            &Point3::new(1.2, 0.0, 1.0),
+            1.0
+        ));
+        assert!(!is_already_handled(
+            &catalog,
+            &Point3::new(5.0, 0.0, 1.0),
+            1.0
+        ));
+        let fresh = MissionTarget::new(2, &Point3::new(9.0, 0.0, 1.0), 4.0);
+        assert!(!fresh.is_finished());
+        assert_eq!(fresh.report.status, "localizing");
+    }
+}

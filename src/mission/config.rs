@@ -1,0 +1,218 @@
+//! Every tunable of a mission, as one serde struct: `scarp simulate --config mission.toml`
+//! reads it (unknown keys are errors naming the key) and `scarp config` prints its defaults.
+
+use serde::{Deserialize, Serialize};
+
+use super::coverage::CoverageConfig;
+
+/// How the mission flies, looks and maps.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MissionConfig {
+    /// Search altitude h_s above the highest terrain under the search area, metres. Default 20.
+    pub search_height_agl_m: f64,
+    /// Inset of the lawn-mower area from the world's edge, metres. Default 10.
+    pub search_inset_m: f64,
+    /// Camera rate in Search and FineLocalize, Hz. Default 4 (the detector's rate, not the
+    /// camera's: the paper's YOLO ran at a few Hz).
+    pub search_camera_rate_hz: f64,
+    /// Camera rate in Map mode, Hz. Default 20 (DESIGN: 20 Hz camera).
+    pub map_camera_rate_hz: f64,
+    /// The run stops (status `timeout`) after this much simulated time, seconds. Default 7200.
+    pub max_sim_time_s: f64,
+    /// A vehicle closer than this to terrain or a rock counts as a collision, metres.
+    /// Default 0.3 (the airframe's radius).
+    pub collision_radius_m: f64,
+    /// The target cylinder from the converged point set.
+    pub cylinder: CylinderEstimateConfig,
+    /// When mapping is complete.
+    pub coverage: CoverageConfig,
+    /// Dense mapping of one target.
+    pub mapping: MappingConfig,
+    /// Paths, trajectories, control and flight.
+    pub planning: scarp_planning::PlanningConfig,
+    /// Depth and colour noise of the simulated camera.
+    pub sensor: scarp_datasets::sensor::SensorConfig,
+    /// GPS/IMU state-estimator error.
+    pub estimator: scarp_datasets::estimator::EstimatorConfig,
+    /// Fragility analysis of each mapped rock.
+    pub fragility: crate::fragility::FragilityConfig,
+}
+
+impl Default for MissionConfig {
+    fn default() -> Self {
+        Self {
+            search_height_agl_m: 20.0,
+            search_inset_m: 10.0,
+            search_camera_rate_hz: 4.0,
+            map_camera_rate_hz: 20.0,
+            max_sim_time_s: 7200.0,
+            collision_radius_m: 0.3,
+            cylinder: CylinderEstimateConfig::default(),
+            coverage: CoverageConfig::default(),
+            mapping: MappingConfig::default(),
+            planning: scarp_planning::PlanningConfig::default(),
+            sensor: scarp_datasets::sensor::SensorConfig::default(),
+            estimator: scarp_datasets::estimator::EstimatorConfig::default(),
+            fragility: crate::fragility::FragilityConfig::default(),
+        }
+    }
+}
+
+impl MissionConfig {
+    /// Parses a mission TOML file's text; `path` names the file in errors.
+    ///
+    /// # Errors
+    /// [`MissionConfigError`] naming the file, the key and the line at fault.
+    pub fn from_toml_str(text: &str, path: &str) -> Result<Self, MissionConfigError> {
+        let config: Self = toml::from_str(text).map_err(|e| MissionConfigError {
+            path: path.to_string(),
+            reason: e.to_string(),
+        })?;
+        config.validate().map_err(|reason| MissionConfigError {
+            path: path.to_string(),
+            reason,
+        })?;
+        Ok(config)
+    }
+
+    /// Checks the mission's own values (nested stages check theirs when they are built).
+    ///
+    /// # Errors
+    /// A message naming the key and the allowed range.
+    pub fn validate(&self) -> Result<(), String> {
+        let positive = [
+            ("search_height_agl_m", self.search_height_agl_m),
+            ("search_camera_rate_hz", self.search_camera_rate_hz),
+            ("map_camera_rate_hz", self.map_camera_rate_hz),
+            ("max_sim_time_s", self.max_sim_time_s),
+            ("collision_radius_m", self.collision_radius_m),
+            ("cylinder.min_radius_m", self.cylinder.min_radius_m),
+            ("mapping.voxel_size_m", self.mapping.voxel_size_m),
+            ("mapping.max_depth_m", self.mapping.max_depth_m),
+        ];
+        for (key, value) in positive {
+            if !(value.is_finite() && value > 0.0) {
+                return Err(format!("`{key}` = {value}: must be a positive number"));
+            }
+        }
+        if !(self.search_inset_m.is_finite() && self.search_inset_m >= 0.0) {
+            return Err(format!(
+                "`search_inset_m` = {}: must be ≥ 0",
+                self.search_inset_m
+            ));
+        }
+        if !(self.cylinder.max_radius_m >= self.cylinder.min_radius_m) {
+            return Err("`cylinder.max_radius_m` must be ≥ `cylinder.min_radius_m`".into());
+        }
+        if !(self.coverage.threshold > 0.0 && self.coverage.threshold <= 1.0) {
+            return Err(format!(
+                "`coverage.threshold` = {}: must lie in (0, 1]",
+                self.coverage.threshold
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// A mission configuration file that does not parse or holds a bad value.
+#[derive(Debug, thiserror::Error)]
+#[error("mission config {path}: {reason}")]
+pub struct MissionConfigError {
+    /// The file.
+    pub path: String,
+    /// What is wrong, with the key and line.
+    pub reason: String,
+}
+
+/// How the target's bounding cylinder (paper §III, mapping) comes from its converged points.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct CylinderEstimateConfig {
+    /// Quantile of the points' horizontal distance from C_e taken as the radius r_e: the paper
+    /// bounds every point, but a few stray points would inflate the rings. Default 0.9.
+    pub radius_quantile: f64,
+    /// Smallest radius, metres. Default 0.6.
+    pub min_radius_m: f64,
+    /// Largest radius, metres. Default 2.5.
+    pub max_radius_m: f64,
+    /// Height of the cylinder's top above C_e, as a multiple of the radius. Default 1.2.
+    pub top_over_center_radii: f64,
+    /// The bottom sits this far below the terrain under C_e, metres (the pedestal's foot).
+    /// Default 0.2.
+    pub bottom_below_terrain_m: f64,
+}
+
+impl Default for CylinderEstimateConfig {
+    fn default() -> Self {
+        Self {
+            radius_quantile: 0.9,
+            min_radius_m: 0.6,
+            max_radius_m: 2.5,
+            top_over_center_radii: 1.2,
+            bottom_below_terrain_m: 0.2,
+        }
+    }
+}
+
+/// Dense mapping of one target inside its region of interest.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MappingConfig {
+    /// TSDF voxel edge, metres. Default 0.01 (issue 3's fragility-grade 1 cm).
+    pub voxel_size_m: f64,
+    /// Depth beyond this is not fused, metres. Default 5.
+    pub max_depth_m: f64,
+    /// The region of interest is the target's cylinder grown by this, metres. Default 0.4.
+    pub roi_margin_m: f64,
+    /// Drop mesh components smaller than this many triangles. Default 500.
+    pub min_component_triangles: usize,
+    /// RGBD odometry.
+    pub odometry: scarp_slam::odometry::OdometryConfig,
+    /// Keyframe selection for bundle adjustment.
+    pub keyframes: scarp_slam::keyframes::KeyframeConfig,
+}
+
+impl Default for MappingConfig {
+    fn default() -> Self {
+        Self {
+            voxel_size_m: 0.01,
+            max_depth_m: 5.0,
+            roi_margin_m: 0.4,
+            min_component_triangles: 500,
+            odometry: scarp_slam::odometry::OdometryConfig::default(),
+            keyframes: scarp_slam::keyframes::KeyframeConfig::default(),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_round_trip_through_toml() {
+        let text = toml::to_string_pretty(&MissionConfig::default()).unwrap();
+        let back = MissionConfig::from_toml_str(&text, "mission.toml").unwrap();
+        assert_eq!(back, MissionConfig::default());
+    }
+
+    #[test]
+    fn unknown_keys_and_bad_values_are_named() {
+        let err = MissionConfig::from_toml_str("search_hieght_agl_m = 3\n", "m.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("m.toml") && err.contains("search_hieght_agl_m"),
+            "{err}"
+        );
+        let err = MissionConfig::from_toml_str("map_camera_rate_hz = -1\n", "m.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("map_camera_rate_hz"), "{err}");
+        let err = MissionConfig::from_toml_str("[coverage]\nthreshold = 2.0\n", "m.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("coverage.threshold"), "{err}");
+    }
+}

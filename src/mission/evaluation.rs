@@ -1,0 +1,98 @@
+//! Ground-truth bookkeeping of a mission: which true rock each target is, how far off its
+//! localization was, which true targets were missed and whether a distractor was mapped.
+//! Per-target mesh and fragility scores are computed when the target is finished
+//! ([`super::mapping::finish_target`]); this module only matches and counts.
+
+use nalgebra::Point3;
+use scarp_datasets::world::{Rock, RockRole, World};
+
+use super::catalog::{Catalog, TargetStatus};
+use super::report::MissionReport;
+
+/// A target farther than this from every true rock's centroid matches none, metres.
+pub const MATCH_RADIUS_M: f64 = 3.0;
+
+/// The true rock whose centroid is nearest `center`, if within [`MATCH_RADIUS_M`], with the
+/// distance.
+pub fn nearest_rock<'w>(world: &'w World, center: &Point3<f64>) -> Option<(&'w Rock, f64)> {
+    world
+        .rocks
+        .iter()
+        .map(|r| (r, (r.centroid - center).norm()))
+        .filter(|(_, d)| *d <= MATCH_RADIUS_M)
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+}
+
+/// Fills each target's `gt_rock_id`, `gt_role` and `localization_error_m`, and the report's
+/// `distractors_mapped` and `targets_missed`.
+pub fn ground_truth_summary(world: &World, targets: &mut Catalog, report: &mut MissionReport) {
+    for m in targets.values_mut() {
+        let center = Point3::from(m.report.center);
+        match nearest_rock(world, &center) {
+            Some((rock, distance)) => {
+                m.report.gt_rock_id = Some(rock.id);
+                m.report.gt_role = Some(rock.role.as_str().into());
+                m.report.localization_error_m = Some(distance);
+            }
+            None => {
+                m.report.gt_rock_id = None;
+                m.report.gt_role = None;
+                m.report.localization_error_m = None;
+            }
+        }
+    }
+    let mapped: Vec<&crate::mission::catalog::MissionTarget> = targets
+        .values()
+        .filter(|m| m.status == TargetStatus::Mapped)
+        .collect();
+    report.distractors_mapped = mapped
+        .iter()
+        .filter(|m| m.report.gt_role.as_deref() != Some(RockRole::Target.as_str()))
+        .count();
+    report.targets_missed = world
+        .targets()
+        .map(|r| r.id)
+        .filter(|id| !mapped.iter().any(|m| m.report.gt_rock_id == Some(*id)))
+        .collect();
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mission::catalog::MissionTarget;
+
+    fn target(center: Point3<f64>, status: TargetStatus) -> MissionTarget {
+        let mut m = MissionTarget::new(0, &center, 0.0);
+        m.set_status(status);
+        m
+    }
+
+    #[test]
+    fn matches_counts_and_misses() {
+        let world = World::builtin_default().unwrap();
+        let rocks: Vec<&Rock> = world.targets().collect();
+        let distractor = world
+            .rocks
+            .iter()
+            .find(|r| r.role == RockRole::Distractor)
+            .unwrap();
+        let mut targets = Catalog::new();
+        let off = nalgebra::Vector3::new(0.3, -0.4, 0.0);
+        targets.insert(1, target(rocks[0].centroid + off, TargetStatus::Mapped));
+        targets.insert(2, target(distractor.centroid, TargetStatus::Mapped));
+        targets.insert(3, target(rocks[1].centroid, TargetStatus::Unconverged));
+        targets.insert(
+            4,
+            target(Point3::new(1e4, 1e4, 0.0), TargetStatus::Localizing),
+        );
+        let mut report = MissionReport::default();
+        ground_truth_summary(&world, &mut targets, &mut report);
+        assert_eq!(targets[&1].report.gt_rock_id, Some(rocks[0].id));
+        assert!((targets[&1].report.localization_error_m.unwrap() - 0.5).abs() < 1e-9);
+        assert_eq!(targets[&2].report.gt_role.as_deref(), Some("distractor"));
+        assert_eq!(targets[&4].report.gt_rock_id, None);
+        assert_eq!(report.distractors_mapped, 1);
+        let expected_missed: Vec<u32> = rocks[1..].iter().map(|r| r.id).collect();
+        assert_eq!(report.targets_missed, expected_missed);
+    }
+}

@@ -1,0 +1,252 @@
+//! What a mission writes: `mission.json` (the interface other tools read), `targets.geojson`
+//! and `targets.csv`. Every file is written atomically, so an interrupted run leaves either the
+//! old file or the new one.
+
+use std::io::Write;
+use std::path::Path;
+
+use nalgebra::Point3;
+use scarp_export::atomic::{write_atomically, write_bytes_atomically};
+use scarp_export::geojson::{EnuFrame, Geodetic, PointFeature, write_geojson};
+use serde::{Deserialize, Serialize};
+
+/// One target in `mission.json`. Ground-truth fields are `null` without ground truth.
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+pub struct TargetReport {
+    /// Mission target id (the localization target id).
+    pub id: u64,
+    /// Status (`mapped`, `incomplete`, …).
+    pub status: String,
+    /// Localized centre C_e, world ENU metres.
+    pub center: [f64; 3],
+    /// The bounding cylinder flown around it: radius, bottom and top z, metres.
+    pub cylinder_radius_m: f64,
+    /// Bottom of the cylinder (world z, m).
+    pub cylinder_z_bottom_m: f64,
+    /// Top of the cylinder (world z, m).
+    pub cylinder_z_top_m: f64,
+    /// Mission time the target was first registered, seconds.
+    pub found_at_s: f64,
+    /// Frames fused into its map.
+    pub frames_mapped: usize,
+    /// Keyframes in its bundle adjustment.
+    pub keyframes: usize,
+    /// Fraction of the cylinder's cells seen.
+    pub coverage: f64,
+    /// Fraction of the cylinder's bottom band seen (the base).
+    pub base_coverage: f64,
+    /// Mesh size.
+    pub triangles: usize,
+    /// Rock height from the mesh, metres.
+    pub size_m: Option<f64>,
+    /// Smallest rocking angle from the mesh, degrees.
+    pub alpha_min_deg: Option<f64>,
+    /// Quasi-static toppling acceleration g·tan(α_min), in g.
+    pub toppling_pga_g: Option<f64>,
+    /// Why it is not `mapped`, when it is not.
+    pub error: Option<String>,
+    /// The true rock nearest the centre (ground truth).
+    pub gt_rock_id: Option<u32>,
+    /// Role of that rock (`target` or `distractor`).
+    pub gt_role: Option<String>,
+    /// Distance from C_e to the true rock's centroid, metres.
+    pub localization_error_m: Option<f64>,
+    /// F-score at τ = 1 cm against the visible ground truth.
+    pub fscore_1cm: Option<f64>,
+    /// F-score at τ = 2 cm against the visible ground truth.
+    pub fscore_2cm: Option<f64>,
+    /// Mean distance from the mesh to the ground truth, metres.
+    pub accuracy_mean_m: Option<f64>,
+    /// Mean distance from the visible ground truth to the mesh, metres.
+    pub completeness_mean_m: Option<f64>,
+    /// Fraction of the true rock's surface visible from the mapping flight.
+    pub gt_visible_fraction: Option<f64>,
+    /// ATE RMSE of the mapping trajectory before bundle adjustment (odometry), metres.
+    pub ate_before_ba_m: Option<f64>,
+    /// ATE RMSE after bundle adjustment, metres.
+    pub ate_after_ba_m: Option<f64>,
+    /// α_min of the true rock on its pedestal, degrees.
+    pub alpha_min_gt_deg: Option<f64>,
+    /// |α_min − α_min,gt|, degrees.
+    pub alpha_error_deg: Option<f64>,
+}
+
+/// Wall time spent in each stage, seconds.
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize)]
+pub struct StageTimings {
+    /// Flight dynamics and control.
+    pub flight_s: f64,
+    /// Path and trajectory planning.
+    pub planning_s: f64,
+    /// Rendering and sensor noise.
+    pub render_s: f64,
+    /// Detection.
+    pub detect_s: f64,
+    /// Box tracking.
+    pub track_s: f64,
+    /// Depth-filter localization.
+    pub localize_s: f64,
+    /// Odometry and TSDF fusion during Map mode.
+    pub map_s: f64,
+    /// Landmarks, bundle adjustment, re-integration and meshing.
+    pub ba_mesh_s: f64,
+    /// Fragility analysis and target export.
+    pub fragility_export_s: f64,
+    /// Ground-truth evaluation.
+    pub evaluation_s: f64,
+}
+
+/// A switch of the mission mode.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct ModeChange {
+    /// Mission time, seconds.
+    pub time_s: f64,
+    /// The new mode: `search`, `fine_localize`, `map`, `done`.
+    pub mode: String,
+    /// The target concerned, if any.
+    pub target: Option<u64>,
+}
+
+/// `mission.json`.
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+pub struct MissionReport {
+    /// The run was stopped (Ctrl-C) before the search finished.
+    pub interrupted: bool,
+    /// Why the run ended: `complete`, `interrupted`, `timeout` or an error message.
+    pub end_reason: String,
+    /// The world (`default` or a file).
+    pub world: String,
+    /// The seed of every random draw.
+    pub seed: u64,
+    /// Simulated time, seconds.
+    pub sim_time_s: f64,
+    /// Wall-clock time, seconds.
+    pub wall_time_s: f64,
+    /// sim_time_s / wall_time_s.
+    pub real_time_factor: f64,
+    /// Controller ticks closer than the collision radius to terrain or a rock.
+    pub collisions: usize,
+    /// Smallest clearance of the true vehicle to terrain and rocks, metres.
+    pub min_clearance_m: Option<f64>,
+    /// Frames taken in Search, FineLocalize and Map modes.
+    pub frames_search: usize,
+    /// Frames taken while flying fine-localization circles.
+    pub frames_fine_localize: usize,
+    /// Frames taken in Map mode.
+    pub frames_map: usize,
+    /// Targets registered by the localization filter.
+    pub targets_found: usize,
+    /// Targets mapped.
+    pub targets_mapped: usize,
+    /// Every target with its status and metrics.
+    pub targets: Vec<TargetReport>,
+    /// Targets mapped whose nearest true rock is a distractor (ground truth).
+    pub distractors_mapped: usize,
+    /// Ids of true targets never mapped (ground truth).
+    pub targets_missed: Vec<u32>,
+    /// Wall time per stage.
+    pub timings: StageTimings,
+    /// The mode log.
+    pub modes: Vec<ModeChange>,
+}
+
+impl MissionReport {
+    /// Writes `mission.json`, `targets.geojson` and `targets.csv` into `dir`.
+    ///
+    /// # Errors
+    /// File-system errors naming the file.
+    pub fn write(&self, dir: &Path, origin: Geodetic) -> anyhow::Result<()> {
+        let json = serde_json::to_string_pretty(self)?;
+        write_bytes_atomically(dir.join("mission.json"), json.as_bytes())?;
+        let features: Vec<PointFeature> = self
+            .targets
+            .iter()
+            .map(|t| PointFeature {
+                position_enu_m: Point3::from(t.center),
+                properties: serde_json::json!({
+                    "id": t.id,
+                    "status": t.status,
+                    "size_m": t.size_m,
+                    "alpha_min_deg": t.alpha_min_deg,
+                    "toppling_pga_g": t.toppling_pga_g,
+                }),
+            })
+            .collect();
+        let frame = EnuFrame::new(origin)?;
+        write_geojson(dir.join("targets.geojson"), &frame, &features)?;
+        write_atomically(dir.join("targets.csv"), |w| {
+            writeln!(
+                w,
+                "id,status,x_m,y_m,z_m,lat_deg,lon_deg,alt_m,size_m,alpha_min_deg,toppling_pga_g"
+            )?;
+            let opt = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.4}"));
+            for t in &self.targets {
+                let g = frame.enu_to_geodetic(&Point3::from(t.center));
+                writeln!(
+                    w,
+                    "{},{},{:.3},{:.3},{:.3},{:.8},{:.8},{:.3},{},{},{}",
+                    t.id,
+                    t.status,
+                    t.center[0],
+                    t.center[1],
+                    t.center[2],
+                    g.lat_deg,
+                    g.lon_deg,
+                    g.alt_m,
+                    opt(t.size_m),
+                    opt(t.alpha_min_deg),
+                    opt(t.toppling_pga_g)
+                )?;
+            }
+            Ok(())
+        })?;
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mission::catalog::TargetStatus;
+
+    #[test]
+    fn writes_json_geojson_and_csv_that_read_back() {
+        let dir = tempfile::tempdir().unwrap();
+        let report = MissionReport {
+            interrupted: true,
+            targets: vec![TargetReport {
+                id: 3,
+                status: TargetStatus::Mapped.as_str().into(),
+                center: [10.0, -5.0, 2.0],
+                alpha_min_deg: Some(12.5),
+                ..TargetReport::default()
+            }],
+            ..MissionReport::default()
+        };
+        let origin = Geodetic {
+            lat_deg: 33.6,
+            lon_deg: -116.5,
+            alt_m: 1200.0,
+        };
+        report.write(dir.path(), origin).unwrap();
+        let json: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(dir.path().join("mission.json")).unwrap())
+                .unwrap();
+        assert_eq!(json["interrupted"], true);
+        assert_eq!(json["targets"][0]["status"], "mapped");
+        let geo: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(dir.path().join("targets.geojson")).unwrap())
+                .unwrap();
+        let coords = &geo["features"][0]["geometry"]["coordinates"];
+        assert!((coords[1].as_f64().unwrap() - 33.6).abs() < 1e-3);
+        assert_eq!(geo["features"][0]["properties"]["alpha_min_deg"], 12.5);
+        let csv = std::fs::read_to_string(dir.path().join("targets.csv")).unwrap();
+        assert_eq!(csv.lines().count(), 2);
+        assert!(
+            csv.lines()
+                .nth(1)
+                .unwrap()
+                .starts_with("3,mapped,10.000,-5.000")
+        );
+    }
+}

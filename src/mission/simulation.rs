@@ -1,0 +1,614 @@
+//! The simulation loop: flight dynamics at the physics rate, the camera at the mode's rate,
+//! rendering at the true pose, perception and mapping at the estimated pose, and the state
+//! machine Search → FineLocalize → Map → Search.
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
+
+use anyhow::Context;
+use nalgebra::{Isometry3, Point3};
+use scarp_datasets::estimator::StateEstimator;
+use scarp_datasets::noise::derive_seed;
+use scarp_datasets::render::Renderer;
+use scarp_datasets::world::World;
+use scarp_export::tum::{StampedPose, write_tum_trajectory};
+use scarp_planning::prelude::{
+    Environment, SearchArea, VerticalCylinder, Waypoint, plan_fine_localization_clear,
+    plan_lawn_mower_clear, plan_mapping_rings_clear,
+};
+use scarp_slam::{PinholeCamera, RgbdFrame};
+
+use super::config::MissionConfig;
+use super::mapping::{MappingSession, finish_target};
+use super::motion::MotionSystem;
+use super::perception::Perception;
+use super::mode::{FlightLogEntry, Mode};
+use super::catalog::{Catalog, MissionTarget, TargetStatus, is_already_handled};
+use super::report::{MissionReport, ModeChange, StageTimings};
+
+/// Where the lawn-mower was left, to resume it.
+#[derive(Debug, Clone)]
+struct SearchProgress {
+    waypoints: Vec<Waypoint>,
+    /// Index of the first waypoint not yet reached.
+    next: usize,
+    altitude_m: f64,
+}
+
+/// Inputs of a mission run.
+pub struct MissionInputs<'a> {
+    /// The world (ground truth for the renderer and the evaluation).
+    pub world: &'a World,
+    /// Its name, for the report.
+    pub world_name: String,
+    /// Every tunable.
+    pub config: MissionConfig,
+    /// Seed of every random draw.
+    pub seed: u64,
+    /// Output directory.
+    pub out: PathBuf,
+    /// Set (by a Ctrl-C handler) to stop the run cleanly.
+    pub stop: &'a AtomicBool,
+}
+
+/// Progress of a running mission, for a progress bar.
+#[derive(Debug, Clone)]
+pub struct Progress {
+    /// Mission time, seconds.
+    pub sim_time_s: f64,
+    /// The mode.
+    pub mode: Mode,
+    /// Targets registered.
+    pub targets_found: usize,
+    /// Targets mapped.
+    pub targets_mapped: usize,
+}
+
+/// The running mission: vehicle, sensors, perception, targets and logs.
+pub struct Mission<'a> {
+    inputs: MissionInputs<'a>,
+    camera: PinholeCamera,
+    body_from_camera: Isometry3<f64>,
+    renderer: Renderer<'a>,
+    env: Environment,
+    motion: MotionSystem,
+    estimator: StateEstimator,
+    perception: Perception,
+    mode: Mode,
+    search: SearchProgress,
+    resume_point: Option<Waypoint>,
+    targets: Catalog,
+    mapping: Option<MappingSession>,
+    log: Vec<FlightLogEntry>,
+    report: MissionReport,
+    frame_index: u64,
+    min_clearance_m: Option<f64>,
+}
+
+impl<'a> Mission<'a> {
+    /// Sets the vehicle at the start of the lawn-mower pattern, hovering.
+    ///
+    /// # Errors
+    /// An invalid configuration, or a search pattern the planner cannot clear.
+    pub fn new(inputs: MissionInputs<'a>) -> anyhow::Result<Self> {
+        let config = &inputs.config;
+        config.validate().map_err(anyhow::Error::msg)?;
+        let world = inputs.world;
+        let cam = &config.planning.camera;
+        let camera = PinholeCamera::from_hfov(cam.width_px, cam.height_px, cam.hfov_deg)?;
+        let env = crate::cli::plan::planning_environment(world)?;
+        let (x0, y0, x1, y1) = world.heightfield.extent();
+        let inset = config.search_inset_m;
+        let area = SearchArea::Rectangle {
+            min_x_m: x0 + inset,
+            min_y_m: y0 + inset,
+            max_x_m: x1 - inset,
+            max_y_m: y1 - inset,
+        };
+        let ground_max = world
+            .heightfield
+            .heights_m
+            .iter()
+            .fold(f64::NEG_INFINITY, |m, &h| m.max(f64::from(h)));
+        let altitude_m = ground_max + config.search_height_agl_m;
+        let lawn = plan_lawn_mower_clear(
+            &area,
+            altitude_m,
+            cam,
+            &config.planning.coverage,
+            &env,
+            &config.planning.clearance,
+        )
+        .context("planning the lawn-mower search")?;
+        let waypoints = lawn.path.waypoints.clone();
+        let first = *waypoints.first().context("the search pattern is empty")?;
+        let mut motion = MotionSystem::new(&config.planning.flight, first.position_m, first.yaw_rad)?;
+        motion.follow(&waypoints[1..], &env, &config.planning)?;
+        let perception = Perception::new(world, config, inputs.seed)?;
+        let estimator = StateEstimator::new(&config.estimator, derive_seed(inputs.seed, 0x5e57));
+        Ok(Self {
+            camera,
+            body_from_camera: cam.body_from_camera(),
+            renderer: Renderer::new(world),
+            env,
+            motion,
+            estimator,
+            perception,
+            mode: Mode::Search,
+            search: SearchProgress {
+                waypoints,
+                next: 1,
+                altitude_m: lawn.altitude_m,
+            },
+            resume_point: None,
+            targets: Catalog::new(),
+            mapping: None,
+            log: Vec::new(),
+            report: MissionReport {
+                world: inputs.world_name.clone(),
+                seed: inputs.seed,
+                modes: vec![ModeChange {
+                    time_s: 0.0,
+                    mode: "search".into(),
+                    target: None,
+                }],
+                ..MissionReport::default()
+            },
+            frame_index: 0,
+            min_clearance_m: None,
+            inputs,
+        })
+    }
+
+    /// The flight log so far.
+    pub fn log(&self) -> &[FlightLogEntry] {
+        &self.log
+    }
+
+    /// The targets so far.
+    pub fn targets(&self) -> &Catalog {
+        &self.targets
+    }
+
+    /// The camera.
+    pub fn camera(&self) -> &PinholeCamera {
+        &self.camera
+    }
+
+    fn set_mode(&mut self, mode: Mode) {
+        self.mode = mode;
+        self.report.modes.push(ModeChange {
+            time_s: self.motion.time_s(),
+            mode: mode.as_str().into(),
+            target: mode.target().map(u64::from),
+        });
+    }
+
+    fn camera_period_s(&self) -> f64 {
+        let c = &self.inputs.config;
+        match self.mode {
+            Mode::Map(_) => 1.0 / c.map_camera_rate_hz,
+            _ => 1.0 / c.search_camera_rate_hz,
+        }
+    }
+
+    /// Runs to the end of the search (or a stop, or the time limit), calling `progress` after
+    /// every camera frame, then writes every output. Returns the report that `mission.json`
+    /// holds.
+    ///
+    /// # Errors
+    /// Rendering, planning or writing errors; the outputs written so far stay consistent.
+    pub fn run(mut self, progress: &mut dyn FnMut(&Progress)) -> anyhow::Result<MissionReport> {
+        let wall = Instant::now();
+        let mut timings = StageTimings::default();
+        let end_reason = loop {
+            if self.inputs.stop.load(Ordering::Relaxed) {
+                break "interrupted".to_string();
+            }
+            if self.mode == Mode::Done {
+                break "complete".to_string();
+            }
+            if self.motion.time_s() > self.inputs.config.max_sim_time_s {
+                break "timeout".to_string();
+            }
+            if let Err(e) = self.step(&mut timings) {
+                break format!("error: {e:#}");
+            }
+            progress(&Progress {
+                sim_time_s: self.motion.time_s(),
+                mode: self.mode,
+                targets_found: self.targets.len(),
+                targets_mapped: self.count(TargetStatus::Mapped),
+            });
+        };
+        self.report.interrupted = end_reason == "interrupted";
+        self.report.end_reason = end_reason;
+        self.finish(wall, timings)
+    }
+
+    fn count(&self, status: TargetStatus) -> usize {
+        self.targets.values().filter(|t| t.status == status).count()
+    }
+
+    /// One camera period: fly, take a frame, act on it.
+    fn step(&mut self, timings: &mut StageTimings) -> anyhow::Result<()> {
+        let t = self.motion.time_s() + self.camera_period_s();
+        let clock = Instant::now();
+        let drift = self.estimator.position_drift_m();
+        self.motion.advance_to(t, &drift)?;
+        let t = self.motion.time_s();
+        let world_from_body = self.motion.world_from_body();
+        if let Some(c) = self.env.clearance_at(&world_from_body.translation.vector.into()) {
+            self.min_clearance_m = Some(self.min_clearance_m.map_or(c.clearance_m, |m| m.min(c.clearance_m)));
+            if c.clearance_m < self.inputs.config.collision_radius_m {
+                self.report.collisions += 1;
+            }
+        }
+        timings.flight_s += clock.elapsed().as_secs_f64();
+
+        let truth = world_from_body * self.body_from_camera;
+        let estimate = self.estimator.observe(t, &truth);
+        self.log.push(FlightLogEntry {
+            time_s: t,
+            world_from_camera_truth: truth,
+            world_from_camera_estimate: estimate,
+            mode: self.mode,
+        });
+        let clock = Instant::now();
+        let frame = self.take_frame(t, &truth)?;
+        timings.render_s += clock.elapsed().as_secs_f64();
+
+        match self.mode {
+            Mode::Search => {
+                self.report.frames_search += 1;
+                self.perceive(&frame, &estimate, timings)?;
+                self.advance_search_progress();
+                if let Some(id) = self.next_target_to_localize() {
+                    self.start_fine_localization(id, timings)?;
+                } else if self.motion.trajectory_done() {
+                    if self.search.next >= self.search.waypoints.len() {
+                        self.set_mode(Mode::Done);
+                    } else {
+                        self.resume_search(timings)?;
+                    }
+                }
+            }
+            Mode::FineLocalize(id) => {
+                self.report.frames_fine_localize += 1;
+                self.perceive(&frame, &estimate, timings)?;
+                match self.perception.target_state(id) {
+                    None => {
+                        // The filter dropped it as a false target.
+                        self.targets.remove(&id);
+                        self.resume_search(timings)?;
+                    }
+                    Some(state) if state.converged => self.start_mapping(id, timings)?,
+                    Some(_) if self.motion.trajectory_done() => {
+                        self.set_status(id, TargetStatus::Unconverged);
+                        self.resume_search(timings)?;
+                    }
+                    Some(_) => {}
+                }
+            }
+            Mode::Map(id) => {
+                self.report.frames_map += 1;
+                let clock = Instant::now();
+                let complete = match self.mapping.as_mut() {
+                    Some(session) => {
+                        session.process(frame, &estimate, &truth)?;
+                        session.coverage().is_complete()
+                    }
+                    None => true,
+                };
+                timings.map_s += clock.elapsed().as_secs_f64();
+                if complete || self.motion.trajectory_done() {
+                    self.finish_mapping(id, timings)?;
+                    self.resume_search(timings)?;
+                }
+            }
+            Mode::Done => {}
+        }
+        Ok(())
+    }
+
+    /// Renders the true view and applies the sensor's noise (seeded per frame).
+    fn take_frame(&mut self, t: f64, truth: &Isometry3<f64>) -> anyhow::Result<RgbdFrame> {
+        let index = self.frame_index;
+        self.frame_index += 1;
+        let rendered = self.renderer.render(&self.camera, truth)?;
+        let sensor = &self.inputs.config.sensor;
+        let seed = derive_seed(self.inputs.seed, index);
+        let depth = sensor.corrupt_depth(&rendered.depth_m, self.camera.fx, seed);
+        let rgb = sensor.corrupt_rgb(&rendered.rgb, derive_seed(seed, 1));
+        Ok(RgbdFrame::new(t, rgb, depth, Some(rendered.instance))?)
+    }
+
+    fn perceive(
+        &mut self,
+        frame: &RgbdFrame,
+        estimate: &Isometry3<f64>,
+        timings: &mut StageTimings,
+    ) -> anyhow::Result<()> {
+        let stage = self.perception.process(frame, &self.camera, estimate)?;
+        timings.detect_s += stage.detect_s;
+        timings.track_s += stage.track_s;
+        timings.localize_s += stage.localize_s;
+        let t = frame.timestamp_s;
+        for state in self.perception.target_states() {
+            if self.targets.contains_key(&state.id) {
+                continue;
+            }
+            // A re-registration of a target already handled (its filter was reset) is skipped.
+            if is_already_handled(&self.targets, &state.center, 1.0) {
+                continue;
+            }
+            self.targets
+                .insert(state.id, MissionTarget::new(state.id, &state.center, t));
+        }
+        // Targets the filter removed as false never become mission targets.
+        let alive: Vec<u32> = self.perception.target_states().iter().map(|s| s.id).collect();
+        self.targets
+            .retain(|id, m| m.status != TargetStatus::Localizing || alive.contains(id));
+        for state in self.perception.target_states() {
+            if let Some(m) = self.targets.get_mut(&state.id)
+                && matches!(m.status, TargetStatus::Localizing | TargetStatus::FineLocalizing)
+            {
+                m.report.center = state.center.coords.into();
+            }
+        }
+        Ok(())
+    }
+
+    fn set_status(&mut self, id: u32, status: TargetStatus) {
+        if let Some(m) = self.targets.get_mut(&id) {
+            m.set_status(status);
+        }
+    }
+
+    /// Marks lawn-mower waypoints the reference has reached.
+    fn advance_search_progress(&mut self) {
+        let here = self.motion.current_waypoint().position_m;
+        while let Some(w) = self.search.waypoints.get(self.search.next) {
+            if (w.position_m - here).norm() < 1.0 {
+                self.search.next += 1;
+            } else {
+                break;
+            }
+        }
+    }
+
+    /// The lowest-id target ready for fine localization (or already converged).
+    fn next_target_to_localize(&self) -> Option<u32> {
+        self.targets
+            .iter()
+            .filter(|(_, m)| m.status == TargetStatus::Localizing)
+            .find(|(id, _)| {
+                self.perception
+                    .target_state(**id)
+                    .is_some_and(|s| s.ready_for_fine_localization || s.converged)
+            })
+            .map(|(id, _)| *id)
+    }
+
+    fn start_fine_localization(&mut self, id: u32, timings: &mut StageTimings) -> anyhow::Result<()> {
+        if self.resume_point.is_none() {
+            self.resume_point = Some(self.motion.current_waypoint());
+        }
+        let Some(state) = self.perception.target_state(id) else {
+            return Ok(());
+        };
+        if state.converged {
+            return self.start_mapping(id, timings);
+        }
+        let clock = Instant::now();
+        let config = &self.inputs.config;
+        let plan = plan_fine_localization_clear(
+            &state.points,
+            &self.motion.current_waypoint(),
+            self.search.altitude_m,
+            &config.planning.camera,
+            &config.planning.fine_localize,
+            &self.env,
+            &config.planning.clearance,
+        );
+        let result = plan.map_err(anyhow::Error::from).and_then(|plan| {
+            self.motion
+                .follow(&plan.path.waypoints[1..], &self.env, &config.planning)
+                .map_err(anyhow::Error::from)
+        });
+        timings.planning_s += clock.elapsed().as_secs_f64();
+        match result {
+            Ok(()) => {
+                self.set_status(id, TargetStatus::FineLocalizing);
+                self.set_mode(Mode::FineLocalize(id));
+            }
+            Err(e) => {
+                self.set_status(id, TargetStatus::Unreachable);
+                if let Some(m) = self.targets.get_mut(&id) {
+                    m.report.error = Some(format!("fine localization: {e:#}"));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The mapping cylinder from the converged point set (paper §III, mapping).
+    fn target_cylinder(&self, points: &[Point3<f64>], center: &Point3<f64>) -> anyhow::Result<VerticalCylinder> {
+        let c = &self.inputs.config.cylinder;
+        let mut radii: Vec<f64> = points
+            .iter()
+            .map(|p| (p.x - center.x).hypot(p.y - center.y))
+            .collect();
+        radii.sort_by(f64::total_cmp);
+        let quantile = radii
+            .get(((radii.len() as f64 - 1.0) * c.radius_quantile).round() as usize)
+            .copied()
+            .unwrap_or(c.min_radius_m);
+        let radius = quantile.clamp(c.min_radius_m, c.max_radius_m);
+        let ground = self.inputs.world.terrain_height_m(center.x, center.y);
+        let bottom = ground - c.bottom_below_terrain_m;
+        let top = (center.z + c.top_over_center_radii * radius).max(bottom + 2.0 * radius);
+        Ok(VerticalCylinder::new(center.x, center.y, radius, bottom, top)?)
+    }
+
+    fn start_mapping(&mut self, id: u32, timings: &mut StageTimings) -> anyhow::Result<()> {
+        let Some(state) = self.perception.target_state(id) else {
+            return self.resume_search(timings);
+        };
+        let clock = Instant::now();
+        let cylinder = self.target_cylinder(&state.points, &state.center)?;
+        let config = &self.inputs.config;
+        let rings = plan_mapping_rings_clear(
+            &cylinder,
+            &self.motion.current_waypoint(),
+            &config.planning.camera,
+            &config.planning.mapping,
+            &self.env,
+            &config.planning.clearance,
+        );
+        let result = rings.map_err(anyhow::Error::from).and_then(|rings| {
+            self.motion
+                .follow(&rings.path.waypoints[1..], &self.env, &config.planning)
+                .map_err(anyhow::Error::from)
+        });
+        timings.planning_s += clock.elapsed().as_secs_f64();
+        if let Some(m) = self.targets.get_mut(&id) {
+            m.report.center = state.center.coords.into();
+            m.report.cylinder_radius_m = cylinder.radius_m;
+            m.report.cylinder_z_bottom_m = cylinder.z_bottom_m;
+            m.report.cylinder_z_top_m = cylinder.z_top_m;
+            m.cylinder = Some(cylinder);
+        }
+        match result {
+            Ok(()) => {
+                self.mapping = Some(MappingSession::new(
+                    id,
+                    &cylinder,
+                    &self.camera,
+                    &self.inputs.config,
+                )?);
+                self.set_status(id, TargetStatus::Mapping);
+                self.set_mode(Mode::Map(id));
+                Ok(())
+            }
+            Err(e) => {
+                self.set_status(id, TargetStatus::Unreachable);
+                if let Some(m) = self.targets.get_mut(&id) {
+                    m.report.error = Some(format!("mapping rings: {e:#}"));
+                }
+                self.resume_search(timings)
+            }
+        }
+    }
+
+    fn finish_mapping(&mut self, id: u32, timings: &mut StageTimings) -> anyhow::Result<()> {
+        let Some(session) = self.mapping.take() else {
+            return Ok(());
+        };
+        let dir = self.inputs.out.join("targets").join(id.to_string());
+        let Some(target) = self.targets.get_mut(&id) else {
+            return Ok(());
+        };
+        let outcome = finish_target(
+            session,
+            self.inputs.world,
+            &self.inputs.config,
+            &dir,
+            &mut target.report,
+            timings,
+        );
+        let status = match outcome {
+            Ok(true) => TargetStatus::Mapped,
+            Ok(false) => TargetStatus::Incomplete,
+            Err(e) => {
+                target.report.error = Some(format!("{e:#}"));
+                TargetStatus::Incomplete
+            }
+        };
+        self.set_status(id, status);
+        Ok(())
+    }
+
+    /// Back to the lawn-mower from where it was left.
+    fn resume_search(&mut self, timings: &mut StageTimings) -> anyhow::Result<()> {
+        self.perception.reset_tracks();
+        let clock = Instant::now();
+        let mut path: Vec<Waypoint> = self.resume_point.take().into_iter().collect();
+        path.extend_from_slice(&self.search.waypoints[self.search.next.min(self.search.waypoints.len())..]);
+        let config = &self.inputs.config;
+        if path.is_empty() {
+            self.set_mode(Mode::Done);
+            return Ok(());
+        }
+        // Climb back to the search altitude first, straight up, so the way back is clear.
+        let here = self.motion.current_waypoint();
+        let mut climb = here;
+        climb.position_m.z = self.search.altitude_m;
+        let mut waypoints = vec![climb];
+        waypoints.extend(path);
+        self.motion.follow(&waypoints, &self.env, &config.planning)?;
+        timings.planning_s += clock.elapsed().as_secs_f64();
+        self.set_mode(Mode::Search);
+        Ok(())
+    }
+
+    /// Evaluates, writes every output and returns the report.
+    fn finish(mut self, wall: Instant, mut timings: StageTimings) -> anyhow::Result<MissionReport> {
+        let out = self.inputs.out.clone();
+        // A target still being mapped when the run stopped is left out of the files: its
+        // directory was never written.
+        if let Some(session) = self.mapping.take() {
+            let id = session.target_id();
+            self.set_status(id, TargetStatus::Incomplete);
+        }
+        let clock = Instant::now();
+        super::evaluation::ground_truth_summary(self.inputs.world, &mut self.targets, &mut self.report);
+        timings.evaluation_s += clock.elapsed().as_secs_f64();
+        self.write_trajectories(&out)?;
+        let sim = self.motion.time_s();
+        let wall_s = wall.elapsed().as_secs_f64();
+        self.report.sim_time_s = sim;
+        self.report.wall_time_s = wall_s;
+        self.report.real_time_factor = if wall_s > 0.0 { sim / wall_s } else { 0.0 };
+        self.report.min_clearance_m = self.min_clearance_m;
+        self.report.timings = timings;
+        self.report.targets = self.targets.values().map(|m| m.report.clone()).collect();
+        self.report.targets_found = self.targets.len();
+        self.report.targets_mapped = self.count(TargetStatus::Mapped);
+        let origin = self.inputs.world.config.origin;
+        self.report.write(
+            &out,
+            scarp_export::geojson::Geodetic {
+                lat_deg: origin.lat_deg,
+                lon_deg: origin.lon_deg,
+                alt_m: origin.alt_m,
+            },
+        )?;
+        super::html::write_report(&out, self.inputs.world, &self.report, &self.log, &self.targets)?;
+        Ok(self.report)
+    }
+
+    fn write_trajectories(&self, out: &Path) -> anyhow::Result<()> {
+        let poses = |f: fn(&FlightLogEntry) -> Isometry3<f64>| -> Vec<StampedPose> {
+            self.log
+                .iter()
+                .map(|e| StampedPose {
+                    timestamp_s: e.time_s,
+                    world_from_camera: f(e),
+                })
+                .collect()
+        };
+        write_tum_trajectory(
+            &out.join("trajectory.txt"),
+            &poses(|e| e.world_from_camera_estimate),
+            "estimated world_from_camera (GPS/IMU) at every camera frame, ENU metres",
+        )?;
+        write_tum_trajectory(
+            &out.join("groundtruth.txt"),
+            &poses(|e| e.world_from_camera_truth),
+            "true world_from_camera at every camera frame, ENU metres",
+        )?;
+        Ok(())
+    }
+}
