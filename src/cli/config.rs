@@ -1,24 +1,10 @@
 //! `scarp config`: print every tunable with its default, as TOML.
 
 use clap::Args;
-use serde::Serialize;
 
 /// Print the default configuration of every stage as TOML.
 #[derive(Debug, Args)]
 pub struct ConfigArgs {}
-
-/// Every stage's tunables, grouped as in a configuration file.
-#[derive(Debug, Default, Serialize)]
-pub struct AllDefaults {
-    /// Depth and colour sensor noise of rendered sequences.
-    pub sensor: scarp_datasets::sensor::SensorConfig,
-    /// State-estimator (GPS/IMU) error of rendered sequences.
-    pub estimator: scarp_datasets::estimator::EstimatorConfig,
-    /// Paths, trajectories, control and flight.
-    pub planning: scarp_planning::PlanningConfig,
-    /// Fragility analysis.
-    pub fragility: crate::fragility::FragilityConfig,
-}
 
 /// The defaults as TOML text.
 ///
@@ -26,8 +12,8 @@ pub struct AllDefaults {
 /// Only if a configuration type could not be expressed in TOML.
 pub fn defaults_toml() -> anyhow::Result<String> {
     Ok(format!(
-        "# scarp defaults: every tunable, with the value used when a configuration omits it.\n{}",
-        toml::to_string_pretty(&AllDefaults::default())?
+        "# scarp defaults: every tunable, with the value used when a configuration omits it.\n# Save as mission.toml, keep what you change, and run `scarp simulate --config mission.toml`.\n{}",
+        toml::to_string_pretty(&crate::mission::config::MissionConfig::default())?
     ))
 }
 
