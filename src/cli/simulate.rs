@@ -1,15 +1,19 @@
-//! `scarp simulate`: the main job. Until the closed-loop mission exists, it writes the default
-//! world's ground truth and renders its demo sequences (a lawn-mower survey and an orbit of the
-//! first target) and says so.
+//! `scarp simulate`: the main job, a closed-loop mission on a world (see [`crate::mission`]).
 
 use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 
+use anyhow::Context;
 use clap::Args;
+use indicatif::{ProgressBar, ProgressStyle};
+use scarp_datasets::world::World;
 
-use super::render::{RenderArgs, render_sequence};
 use super::world::write_world;
+use crate::mission::config::MissionConfig;
+use crate::mission::simulation::{Mission, MissionInputs};
 
-/// Run the simulated mission on a world.
+/// Run the simulated mission on a world: search, localize, map and measure every target.
 #[derive(Debug, Args)]
 pub struct SimulateArgs {
     /// `default` for the built-in world, or a world TOML file.
@@ -21,45 +25,86 @@ pub struct SimulateArgs {
     /// Seed of every random draw.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Print a JSON summary on stdout.
+    /// Mission configuration (TOML; `scarp config` prints every key with its default).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Print `mission.json` on stdout.
     #[arg(long)]
     pub json: bool,
+}
+
+fn load_config(path: Option<&PathBuf>) -> anyhow::Result<MissionConfig> {
+    let Some(path) = path else {
+        return Ok(MissionConfig::default());
+    };
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    Ok(MissionConfig::from_toml_str(&text, &path.display().to_string())?)
 }
 
 /// Runs `scarp simulate`.
 ///
 /// # Errors
-/// World, rendering and writing errors.
+/// World, configuration, planning and writing errors. Ctrl-C is not an error: the run stops,
+/// writes its outputs with `interrupted: true` and returns.
 pub fn run(args: SimulateArgs) -> anyhow::Result<()> {
-    eprintln!(
-        "scarp simulate: the closed-loop mission is not built yet; rendering the demo sequences of world `{}` instead",
-        args.world
-    );
-    let world = scarp_datasets::world::World::from_name_or_path(&args.world)?;
+    let config = load_config(args.config.as_ref())?;
+    let world = World::from_name_or_path(&args.world)
+        .with_context(|| format!("loading world `{}`", args.world))?;
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating {}", args.out.display()))?;
     write_world(&world, &args.out.join("world_gt"))?;
-    let mut summaries = serde_json::Map::new();
-    for (path, frames) in [("lawnmower", 200), ("orbit", 120)] {
-        let render = RenderArgs {
-            world: args.world.clone(),
-            path: path.into(),
-            frames,
-            out: args.out.join(path),
-            seed: args.seed,
-            no_noise: false,
-            depth_scale: None,
-            json: false,
-        };
-        let summary = render_sequence(&render)?;
-        eprintln!(
-            "{path}: {} frames in {:.1} s → {}",
-            summary.frames,
-            summary.seconds,
-            render.out.display()
-        );
-        summaries.insert(path.into(), serde_json::to_value(&summary)?);
+
+    let stop = Arc::new(AtomicBool::new(false));
+    {
+        let stop = Arc::clone(&stop);
+        // A second handler (tests running the CLI twice in one process) is refused; the first
+        // one still sets its own flag, so only a library caller loses Ctrl-C handling.
+        let _ = ctrlc::set_handler(move || stop.store(true, Ordering::Relaxed));
     }
+    let mission = Mission::new(MissionInputs {
+        world: &world,
+        world_name: args.world.clone(),
+        config,
+        seed: args.seed,
+        out: args.out.clone(),
+        stop: &stop,
+    })?;
+    let bar = ProgressBar::new_spinner();
+    if let Ok(style) = ProgressStyle::with_template("{spinner} {elapsed} {msg}") {
+        bar.set_style(style);
+    }
+    let mut last_update = 0.0;
+    let report = mission.run(&mut |p| {
+        if p.sim_time_s - last_update >= 1.0 {
+            last_update = p.sim_time_s;
+            bar.set_message(format!(
+                "sim {:>6.0} s · {:<13} · targets found {} mapped {}",
+                p.sim_time_s,
+                p.mode.as_str(),
+                p.targets_found,
+                p.targets_mapped
+            ));
+            bar.tick();
+        }
+    })?;
+    bar.finish_and_clear();
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&summaries)?);
+        println!("{}", serde_json::to_string_pretty(&report)?);
     }
+    eprintln!(
+        "{}: {} targets mapped of {} found, {} distractors mapped, missed {:?}, {} collisions; \
+         {:.0} s simulated in {:.0} s (×{:.1}) → {}",
+        report.end_reason,
+        report.targets_mapped,
+        report.targets_found,
+        report.distractors_mapped,
+        report.targets_missed,
+        report.collisions,
+        report.sim_time_s,
+        report.wall_time_s,
+        report.real_time_factor,
+        args.out.display()
+    );
     Ok(())
 }

@@ -167,6 +167,9 @@ pub struct MappingConfig {
     pub roi_margin_m: f64,
     /// Drop mesh components smaller than this many triangles. Default 500.
     pub min_component_triangles: usize,
+    /// Besides keyframes, every n-th mapped frame is kept for re-integration after bundle
+    /// adjustment. Default 4 (5 Hz of the 20 Hz camera).
+    pub store_every: usize,
     /// RGBD odometry.
     pub odometry: scarp_slam::odometry::OdometryConfig,
     /// Keyframe selection for bundle adjustment.
@@ -180,6 +183,7 @@ impl Default for MappingConfig {
             max_depth_m: 5.0,
             roi_margin_m: 0.4,
             min_component_triangles: 500,
+            store_every: 4,
             odometry: scarp_slam::odometry::OdometryConfig::default(),
             keyframes: scarp_slam::keyframes::KeyframeConfig::default(),
         }

@@ -355,6 +355,7 @@ impl<'a> Mission<'a> {
                 && matches!(m.status, TargetStatus::Localizing | TargetStatus::FineLocalizing)
             {
                 m.report.center = state.center.coords.into();
+                m.covariance_xy = Some(state.covariance_xy);
             }
         }
         Ok(())
@@ -510,8 +511,14 @@ impl<'a> Mission<'a> {
         let Some(target) = self.targets.get_mut(&id) else {
             return Ok(());
         };
+        let points = self
+            .perception
+            .target_state(id)
+            .map(|s| s.points)
+            .unwrap_or_default();
         let outcome = finish_target(
             session,
+            &points,
             self.inputs.world,
             &self.inputs.config,
             &dir,
@@ -532,7 +539,7 @@ impl<'a> Mission<'a> {
 
     /// Back to the lawn-mower from where it was left.
     fn resume_search(&mut self, timings: &mut StageTimings) -> anyhow::Result<()> {
-        self.perception.reset_tracks();
+        self.perception.reset_tracks()?;
         let clock = Instant::now();
         let mut path: Vec<Waypoint> = self.resume_point.take().into_iter().collect();
         path.extend_from_slice(&self.search.waypoints[self.search.next.min(self.search.waypoints.len())..]);

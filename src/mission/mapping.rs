@@ -1,0 +1,372 @@
+//! Map mode for one target: frame-to-model RGBD odometry and TSDF fusion inside the target's
+//! cylinder region of interest (plus a margin), the coverage test that ends it, then bundle
+//! adjustment, re-integration, the mesh, fragility and export.
+//!
+//! Frames whose view misses the region of interest are not mapped at all. Keyframes and every
+//! `store_every`-th frame are kept (without their instance masks) for bundle adjustment and
+//! re-integration; the rest are dropped after fusion, so memory stays bounded by the mapping
+//! flight's length, not the camera rate.
+
+use std::path::Path;
+use std::time::Instant;
+
+use anyhow::Context;
+use nalgebra::{Isometry3, Point3, Vector3};
+use scarp_datasets::world::World;
+use scarp_export::atomic::write_bytes_atomically;
+use scarp_export::glb::{GlbNode, GlbOptions, write_glb};
+use scarp_export::ply::{PlyEncoding, write_mesh, write_point_cloud};
+use scarp_export::tum::StampedPose;
+use scarp_planning::prelude::VerticalCylinder;
+use scarp_slam::mapping::{ModelTracker, ModelTrackingConfig};
+use scarp_slam::meshing::{MeshingConfig, extract_mesh};
+use scarp_slam::tsdf::roi::Roi;
+use scarp_slam::tsdf::{TsdfConfig, TsdfVolume};
+use scarp_slam::{PinholeCamera, PointCloud, RgbdFrame, TriangleMesh};
+
+use super::config::MissionConfig;
+use super::coverage::CylinderCoverage;
+use super::evaluation::nearest_rock;
+use super::report::{StageTimings, TargetReport};
+use crate::evaluation::mesh::{MeshEvalConfig, Visibility, evaluate_mesh};
+use crate::evaluation::trajectory::{Alignment, TrajectoryEvalConfig, evaluate_trajectory, umeyama};
+use crate::fragility::{ContactSpec, analyze, analyze_detailed};
+
+/// A frame kept for bundle adjustment and re-integration.
+#[derive(Debug, Clone)]
+pub struct StoredFrame {
+    /// The frame (without its instance mask).
+    pub frame: RgbdFrame,
+    /// The pose it was fused at (odometry), world ENU.
+    pub world_from_camera_odometry: Isometry3<f64>,
+    /// The state estimate at the frame.
+    pub world_from_camera_estimate: Isometry3<f64>,
+    /// The true pose (ground truth, for evaluation only).
+    pub world_from_camera_truth: Isometry3<f64>,
+    /// Whether the keyframe selector chose it.
+    pub keyframe: bool,
+}
+
+/// The state of mapping one target.
+pub struct MappingSession {
+    target_id: u32,
+    cylinder: VerticalCylinder,
+    roi: Roi,
+    camera: PinholeCamera,
+    tracker: ModelTracker,
+    coverage: CylinderCoverage,
+    stored: Vec<StoredFrame>,
+    frames_mapped: usize,
+    odometry_failures: usize,
+    store_every: usize,
+}
+
+/// The region of interest: the cylinder grown by `margin_m` on every side.
+pub fn roi_of(cylinder: &VerticalCylinder, margin_m: f64) -> Roi {
+    Roi::Cylinder {
+        center_xy: [cylinder.center_x_m, cylinder.center_y_m],
+        z_min: cylinder.z_bottom_m - margin_m,
+        z_max: cylinder.z_top_m + margin_m,
+        radius_m: cylinder.radius_m + margin_m,
+    }
+}
+
+/// Whether any of the cylinder's axis points (bottom, middle, top) and rim points at mid height
+/// projects inside the image at `world_from_camera`, in front of the camera and within
+/// `max_depth_m`.
+pub fn sees_cylinder(
+    camera: &PinholeCamera,
+    world_from_camera: &Isometry3<f64>,
+    cylinder: &VerticalCylinder,
+    max_depth_m: f64,
+) -> bool {
+    let camera_from_world = world_from_camera.inverse();
+    let mid = 0.5 * (cylinder.z_bottom_m + cylinder.z_top_m);
+    let mut probes = vec![
+        cylinder.axis_point(cylinder.z_bottom_m),
+        cylinder.axis_point(mid),
+        cylinder.axis_point(cylinder.z_top_m),
+    ];
+    for k in 0..8 {
+        let a = f64::from(k) / 8.0 * std::f64::consts::TAU;
+        probes.push(cylinder.axis_point(mid) + Vector3::new(a.cos(), a.sin(), 0.0) * cylinder.radius_m);
+    }
+    probes.iter().any(|p| {
+        let q = camera_from_world * p;
+        q.z > 0.0 && q.z <= max_depth_m && camera.project(&q).is_some_and(|px| camera.in_bounds(&px, 0.0))
+    })
+}
+
+impl MappingSession {
+    /// An empty map of target `target_id` inside `cylinder` (grown by the configured margin).
+    ///
+    /// # Errors
+    /// Invalid TSDF, odometry or camera settings.
+    pub fn new(
+        target_id: u32,
+        cylinder: &VerticalCylinder,
+        camera: &PinholeCamera,
+        config: &MissionConfig,
+    ) -> anyhow::Result<Self> {
+        let m = &config.mapping;
+        let roi = roi_of(cylinder, m.roi_margin_m);
+        let tsdf = TsdfConfig {
+            voxel_size_m: m.voxel_size_m as f32,
+            max_depth_m: m.max_depth_m as f32,
+            roi: Some(roi.clone()),
+            ..TsdfConfig::default()
+        };
+        let tracking = ModelTrackingConfig {
+            tsdf,
+            odometry: m.odometry.clone(),
+            keyframes: m.keyframes,
+            ..ModelTrackingConfig::default()
+        };
+        Ok(Self {
+            target_id,
+            cylinder: *cylinder,
+            roi,
+            camera: *camera,
+            tracker: ModelTracker::new(*camera, tracking)?,
+            coverage: CylinderCoverage::new(cylinder, config.coverage),
+            stored: Vec::new(),
+            frames_mapped: 0,
+            odometry_failures: 0,
+            store_every: m.store_every.max(1),
+        })
+    }
+
+    /// The target being mapped.
+    pub fn target_id(&self) -> u32 {
+        self.target_id
+    }
+
+    /// Coverage of the cylinder so far.
+    pub fn coverage(&self) -> &CylinderCoverage {
+        &self.coverage
+    }
+
+    /// Maps one frame when its view meets the region of interest: tracks it against the model,
+    /// fuses it, updates the coverage and keeps it if it is a keyframe or due for storage.
+    ///
+    /// # Errors
+    /// A frame that does not match the camera or a non-finite estimate.
+    pub fn process(
+        &mut self,
+        mut frame: RgbdFrame,
+        world_from_camera_estimate: &Isometry3<f64>,
+        world_from_camera_truth: &Isometry3<f64>,
+    ) -> anyhow::Result<()> {
+        let max_depth = f64::from(self.tracker.volume().config().max_depth_m);
+        if !sees_cylinder(&self.camera, world_from_camera_estimate, &self.cylinder, max_depth) {
+            return Ok(());
+        }
+        frame.instance_mask = None;
+        let tracked = self.tracker.process(&frame, world_from_camera_estimate)?;
+        if tracked.fell_back {
+            self.odometry_failures += 1;
+        }
+        self.coverage.observe(&self.camera, &tracked.world_from_camera);
+        let keyframe = tracked.keyframe.is_some();
+        if keyframe || self.frames_mapped % self.store_every == 0 {
+            self.stored.push(StoredFrame {
+                frame,
+                world_from_camera_odometry: tracked.world_from_camera,
+                world_from_camera_estimate: *world_from_camera_estimate,
+                world_from_camera_truth: *world_from_camera_truth,
+                keyframe,
+            });
+        }
+        self.frames_mapped += 1;
+        Ok(())
+    }
+}
+
+fn stamped(frames: &[StoredFrame], pose: impl Fn(&StoredFrame) -> Isometry3<f64>) -> Vec<StampedPose> {
+    frames
+        .iter()
+        .map(|f| StampedPose {
+            timestamp_s: f.frame.timestamp_s,
+            world_from_camera: pose(f),
+        })
+        .collect()
+}
+
+/// ATE RMSE (SE(3)-aligned) of `poses` against the stored frames' truth.
+fn ate_rmse(frames: &[StoredFrame], poses: &[Isometry3<f64>]) -> Option<f64> {
+    let truth = stamped(frames, |f| f.world_from_camera_truth);
+    let estimate: Vec<StampedPose> = frames
+        .iter()
+        .zip(poses)
+        .map(|(f, p)| StampedPose {
+            timestamp_s: f.frame.timestamp_s,
+            world_from_camera: *p,
+        })
+        .collect();
+    let config = TrajectoryEvalConfig {
+        alignment: Alignment::Se3,
+        ..TrajectoryEvalConfig::default()
+    };
+    evaluate_trajectory(&truth, &estimate, &config).ok().map(|m| m.ate_rmse_m)
+}
+
+/// The rigid transform that best maps the mapping trajectory's camera centres onto the true
+/// ones (Umeyama, no scale): the map frame's offset from the world, the GPS error at mapping.
+fn map_to_world(frames: &[StoredFrame], poses: &[Isometry3<f64>]) -> Option<Isometry3<f64>> {
+    let source: Vec<Vector3<f64>> = poses.iter().map(|p| p.translation.vector).collect();
+    let target: Vec<Vector3<f64>> = frames.iter().map(|f| f.world_from_camera_truth.translation.vector).collect();
+    let s = umeyama(&source, &target, false).ok()?;
+    Some(Isometry3::from_parts(
+        s.translation.into(),
+        nalgebra::UnitQuaternion::from_rotation_matrix(&s.rotation),
+    ))
+}
+
+/// Finishes a target: bundle adjustment of the stored frames, re-integration, mesh, fragility,
+/// files in `dir` (`mesh.ply`, `mesh.glb`, `points.ply`, `fragility.json`, view PNGs) and, with
+/// ground truth, the scores in `report`. Returns whether the target counts as mapped (coverage
+/// reached and fragility analysed).
+///
+/// # Errors
+/// Only writing errors; a failed analysis is recorded in `report.error`.
+pub fn finish_target(
+    session: MappingSession,
+    points: &[Point3<f64>],
+    world: &World,
+    config: &MissionConfig,
+    dir: &Path,
+    report: &mut TargetReport,
+    timings: &mut StageTimings,
+) -> anyhow::Result<bool> {
+    let clock = Instant::now();
+    report.frames_mapped = session.frames_mapped;
+    report.coverage = session.coverage.fraction();
+    report.base_coverage = session.coverage.bottom_fraction();
+    report.keyframes = session.stored.iter().filter(|f| f.keyframe).count();
+    let complete = session.coverage.is_complete();
+    let frames = session.stored;
+    if frames.len() < 3 {
+        report.error = Some(format!("only {} frames were mapped", frames.len()));
+        return Ok(false);
+    }
+    let odometry_poses: Vec<Isometry3<f64>> = frames.iter().map(|f| f.world_from_camera_odometry).collect();
+    let refined = super::bundle::refine(&frames, &session.camera, &session.roi, config)?;
+    let mut volume = TsdfVolume::new(session.tracker.volume().config().clone())?;
+    let rgbd: Vec<RgbdFrame> = frames.iter().map(|f| f.frame.clone()).collect();
+    volume.reintegrate(&rgbd, &session.camera, &refined)?;
+    let meshing = MeshingConfig {
+        min_component_triangles: config.mapping.min_component_triangles,
+        ..MeshingConfig::default()
+    };
+    let mesh = extract_mesh(&volume, &meshing);
+    report.triangles = mesh.faces.len();
+    timings.ba_mesh_s += clock.elapsed().as_secs_f64();
+
+    let clock = Instant::now();
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let fragility = analyze_detailed(&mesh, ContactSpec::Auto, &config.fragility);
+    let mut mapped = complete;
+    match &fragility {
+        Ok(analysis) => {
+            let r = &analysis.report;
+            report.alpha_min_deg = Some(r.alpha_min_deg);
+            report.toppling_pga_g = Some(r.toppling_pga_g);
+            report.size_m = Some(r.rock_height_m);
+            let json = serde_json::to_string_pretty(r)?;
+            write_bytes_atomically(dir.join("fragility.json"), json.as_bytes())?;
+        }
+        Err(e) => {
+            report.error = Some(format!("fragility: {e}"));
+            mapped = false;
+        }
+    }
+    if !complete && report.error.is_none() {
+        report.error = Some(format!(
+            "coverage {:.2} below the threshold {:.2}",
+            report.coverage, config.coverage.threshold
+        ));
+    }
+    write_mesh(dir.join("mesh.ply"), &mesh, PlyEncoding::BinaryLittleEndian)?;
+    let mut extras = serde_json::json!({"target_id": report.id, "status": if mapped {"mapped"} else {"incomplete"}});
+    if let Some(a) = report.alpha_min_deg {
+        extras["alpha_min_deg"] = a.into();
+        extras["toppling_pga_g"] = report.toppling_pga_g.into();
+    }
+    write_glb(
+        dir.join("mesh.glb"),
+        &[GlbNode {
+            name: format!("target_{}", report.id),
+            mesh: &mesh,
+            extras,
+        }],
+        &GlbOptions::default(),
+    )?;
+    let cloud = PointCloud::from_positions(points.iter().map(|p| p.cast::<f32>()).collect());
+    write_point_cloud(dir.join("points.ply"), &cloud, PlyEncoding::BinaryLittleEndian)?;
+    if !mesh.faces.is_empty() {
+        let view_mesh = fragility.as_ref().map_or_else(|_| mesh.clone(), |a| a.closed_rock());
+        super::html::write_mesh_views(world, &view_mesh, dir)?;
+    }
+    timings.fragility_export_s += clock.elapsed().as_secs_f64();
+
+    let clock = Instant::now();
+    score_against_ground_truth(world, config, &frames, &odometry_poses, &refined, &mesh, report, &session.camera);
+    timings.evaluation_s += clock.elapsed().as_secs_f64();
+    Ok(mapped)
+}
+
+/// Fills the ground-truth fields of `report` (nothing when no true rock is near).
+#[allow(clippy::too_many_arguments)]
+fn score_against_ground_truth(
+    world: &World,
+    config: &MissionConfig,
+    frames: &[StoredFrame],
+    odometry_poses: &[Isometry3<f64>],
+    refined: &[Isometry3<f64>],
+    mesh: &TriangleMesh,
+    report: &mut TargetReport,
+    camera: &PinholeCamera,
+) {
+    let Some((rock, _)) = nearest_rock(world, &Point3::from(report.center)) else {
+        return;
+    };
+    report.ate_before_ba_m = ate_rmse(frames, odometry_poses);
+    report.ate_after_ba_m = ate_rmse(frames, refined);
+    if let Some(pedestal) = &rock.pedestal
+        && let Ok(gt) = analyze(&rock.mesh, ContactSpec::Pedestal(pedestal), &config.fragility)
+    {
+        report.alpha_min_gt_deg = Some(gt.alpha_min_deg);
+        report.alpha_error_deg = report.alpha_min_deg.map(|a| (a - gt.alpha_min_deg).abs());
+    }
+    let Some(world_from_map) = map_to_world(frames, refined) else {
+        return;
+    };
+    let mut aligned = mesh.clone();
+    aligned.transform(&world_from_map);
+    // Visibility from at most 60 of the mapping flight's true poses: enough to tell the base
+    // and the contact from what a camera saw.
+    let step = frames.len().div_ceil(60).max(1);
+    let visibility = Visibility {
+        world,
+        camera: *camera,
+        world_from_camera: frames.iter().step_by(step).map(|f| f.world_from_camera_truth).collect(),
+        tolerance_m: 0.01,
+    };
+    for (tau, slot) in [(0.01, 0usize), (0.02, 1)] {
+        let eval_config = MeshEvalConfig {
+            tau_m: tau,
+            crop_to_gt_m: Some(0.1),
+            ..MeshEvalConfig::default()
+        };
+        if let Ok(e) = evaluate_mesh(&aligned, &rock.mesh, &eval_config, Some(&visibility)) {
+            if slot == 0 {
+                report.fscore_1cm = Some(e.fscore);
+                report.accuracy_mean_m = Some(e.accuracy_mean_m);
+                report.completeness_mean_m = Some(e.completeness_mean_m);
+                report.gt_visible_fraction = Some(e.gt_visible_fraction);
+            } else {
+                report.fscore_2cm = Some(e.fscore);
+            }
+        }
+    }
+}

@@ -1,0 +1,103 @@
+//! End-to-end test of the closed-loop mission (`scarp simulate`) on a small world: one target,
+//! one distractor. The full default world is the README's main command; this keeps CI quick.
+
+use std::path::Path;
+use std::process::Command;
+
+fn scarp(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_scarp"))
+        .args(args)
+        .output()
+        .expect("the scarp binary runs")
+}
+
+fn data(name: &str) -> String {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data")
+        .join(name)
+        .display()
+        .to_string()
+}
+
+#[test]
+fn small_world_mission_finds_maps_and_measures_its_target() {
+    let dir = tempfile::tempdir().unwrap();
+    let out_dir = dir.path().join("mission");
+    let out = scarp(&[
+        "simulate",
+        "--world",
+        &data("small_world.toml"),
+        "--config",
+        &data("small_mission.toml"),
+        "--seed",
+        "3",
+        "--out",
+        out_dir.to_str().unwrap(),
+    ]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    let json: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out_dir.join("mission.json")).unwrap()).unwrap();
+    assert_eq!(json["interrupted"], false, "{json:#}");
+    assert_eq!(json["end_reason"], "complete", "{json:#}");
+    assert_eq!(json["collisions"], 0);
+    assert_eq!(json["distractors_mapped"], 0);
+    assert_eq!(json["targets_missed"].as_array().unwrap().len(), 0, "{json:#}");
+    for key in ["sim_time_s", "wall_time_s", "real_time_factor"] {
+        assert!(json[key].as_f64().unwrap() > 0.0, "{key}");
+    }
+    let targets = json["targets"].as_array().unwrap();
+    let mapped: Vec<&serde_json::Value> =
+        targets.iter().filter(|t| t["status"] == "mapped").collect();
+    assert_eq!(mapped.len(), 1, "{json:#}");
+    let t = mapped[0];
+    assert_eq!(t["gt_rock_id"], 1);
+    assert!(t["localization_error_m"].as_f64().unwrap() <= 1.0, "{t:#}");
+    assert!(t["fscore_2cm"].as_f64().unwrap() >= 0.8, "{t:#}");
+    assert!(t["alpha_error_deg"].as_f64().unwrap() <= 3.0, "{t:#}");
+    assert!(t["ate_after_ba_m"].as_f64().is_some(), "{t:#}");
+    assert!(t["gt_visible_fraction"].as_f64().unwrap() > 0.3, "{t:#}");
+
+    let id = t["id"].as_u64().unwrap().to_string();
+    let target_dir = out_dir.join("targets").join(&id);
+    for file in ["mesh.ply", "mesh.glb", "points.ply", "fragility.json", "view_below.png"] {
+        assert!(target_dir.join(file).is_file(), "missing targets/{id}/{file}");
+    }
+    let mesh = scarp_export::ply::read_mesh(target_dir.join("mesh.ply")).unwrap();
+    assert!(mesh.face_count() > 1000);
+    scarp_export::glb::read_glb(target_dir.join("mesh.glb")).unwrap();
+    for file in [
+        "targets.geojson",
+        "targets.csv",
+        "trajectory.txt",
+        "groundtruth.txt",
+        "report.html",
+        "map.png",
+        "world_gt/world.json",
+    ] {
+        assert!(out_dir.join(file).is_file(), "missing {file}");
+    }
+    let geo: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out_dir.join("targets.geojson")).unwrap()).unwrap();
+    assert!(!geo["features"].as_array().unwrap().is_empty());
+}
+
+#[test]
+fn bad_mission_config_key_is_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("mission.toml");
+    std::fs::write(&config, "search_hieght_agl_m = 5\n").unwrap();
+    let out = scarp(&[
+        "simulate",
+        "--world",
+        &data("small_world.toml"),
+        "--config",
+        config.to_str().unwrap(),
+        "--out",
+        dir.path().join("out").to_str().unwrap(),
+    ]);
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("search_hieght_agl_m"), "{stderr}");
+    assert!(!dir.path().join("out/mission.json").exists());
+}
