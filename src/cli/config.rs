@@ -34,12 +34,18 @@ mod tests {
     fn defaults_print_and_parse_back() {
         let text = defaults_toml().unwrap();
         let value: toml::Table = toml::from_str(&text).unwrap();
-        for section in ["sensor", "estimator", "planning", "fragility"] {
+        for section in ["sensor", "estimator", "planning", "fragility", "detection"] {
             assert!(value.contains_key(section), "{section}");
         }
         let sensor: scarp_datasets::sensor::SensorConfig =
             value["sensor"].clone().try_into().unwrap();
         assert_eq!(sensor, scarp_datasets::sensor::SensorConfig::default());
         assert_eq!(value["sensor"]["baseline_m"].as_float(), Some(0.12));
+        let simulated: crate::detection::SimulatedDetectorConfig =
+            value["detection"]["simulated"].clone().try_into().unwrap();
+        assert_eq!(
+            simulated,
+            crate::detection::SimulatedDetectorConfig::default()
+        );
     }
 }

@@ -23,6 +23,8 @@ pub struct MissionConfig {
     /// A vehicle closer than this to terrain or a rock counts as a collision, metres.
     /// Default 0.3 (the airframe's radius).
     pub collision_radius_m: f64,
+    /// Target detectors (the mission flies the simulated one).
+    pub detection: DetectionConfig,
     /// The target cylinder from the converged point set.
     pub cylinder: CylinderEstimateConfig,
     /// When mapping is complete.
@@ -48,6 +50,7 @@ impl Default for MissionConfig {
             map_camera_rate_hz: 20.0,
             max_sim_time_s: 7200.0,
             collision_radius_m: 0.3,
+            detection: DetectionConfig::default(),
             cylinder: CylinderEstimateConfig::default(),
             coverage: CoverageConfig::default(),
             mapping: MappingConfig::default(),
@@ -123,6 +126,16 @@ pub struct MissionConfigError {
     pub path: String,
     /// What is wrong, with the key and line.
     pub reason: String,
+}
+
+/// The detectors' tunables.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DetectionConfig {
+    /// The modelled detector of synthetic sequences (its seed is derived from the mission's).
+    pub simulated: crate::detection::SimulatedDetectorConfig,
+    /// The ONNX YOLO detector (cargo feature `onnx`).
+    pub onnx: crate::detection::OnnxDetectorConfig,
 }
 
 /// How the target's bounding cylinder (paper §III, mapping) comes from its converged points.

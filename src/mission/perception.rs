@@ -64,7 +64,7 @@ impl Perception {
     /// # Errors
     /// Invalid detector, tracker or localization settings.
     pub fn new(world: &World, config: &MissionConfig, seed: u64) -> anyhow::Result<Self> {
-        let mut detector_config = config.detector.clone();
+        let mut detector_config = config.detection.simulated.clone();
         detector_config.seed = derive_seed(seed, 0xde7);
         Ok(Self {
             detector: SimulatedDetector::for_world(detector_config, world)?,
