@@ -12,4 +12,5 @@ pub mod cli;
 pub mod detection;
 pub mod evaluation;
 pub mod fragility;
+pub mod localization;
 pub mod mission;

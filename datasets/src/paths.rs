@@ -80,16 +80,49 @@ pub fn lawnmower(
     hfov_deg: f64,
     frames: usize,
 ) -> Result<Vec<StampedPose>, DatasetError> {
+    lawnmower_in(
+        world,
+        world.heightfield.extent(),
+        altitude_m,
+        hfov_deg,
+        frames,
+    )
+}
+
+/// The terrain's mean height (world z), m: the datum of survey altitudes.
+pub fn mean_terrain_height_m(world: &World) -> f64 {
+    let heights = &world.heightfield.heights_m;
+    heights.iter().map(|&h| f64::from(h)).sum::<f64>() / heights.len().max(1) as f64
+}
+
+/// Like [`lawnmower`], over the rectangle `area` = (x_min, y_min, x_max, y_max) (world x, y,
+/// m) instead of the whole terrain; the altitude is still above the terrain's mean height.
+///
+/// # Errors
+/// [`DatasetError::Invalid`] for zero frames, a non-positive altitude or an empty or
+/// non-finite area.
+pub fn lawnmower_in(
+    world: &World,
+    area: (f64, f64, f64, f64),
+    altitude_m: f64,
+    hfov_deg: f64,
+    frames: usize,
+) -> Result<Vec<StampedPose>, DatasetError> {
     if frames == 0 || !(altitude_m > 0.0) {
         return Err(DatasetError::invalid(
             "lawnmower",
             "needs at least one frame and a positive altitude",
         ));
     }
-    let (x0, y0, x1, y1) = world.heightfield.extent();
-    let heights = &world.heightfield.heights_m;
-    let mean_z = heights.iter().map(|&h| f64::from(h)).sum::<f64>() / heights.len().max(1) as f64;
-    let z = mean_z + altitude_m;
+    let (x0, y0, x1, y1) = area;
+    let finite = [x0, y0, x1, y1].iter().all(|v| v.is_finite());
+    if !finite || x1 <= x0 || y1 <= y0 {
+        return Err(DatasetError::invalid(
+            "lawnmower",
+            "the area must be a finite, non-empty rectangle",
+        ));
+    }
+    let z = mean_terrain_height_m(world) + altitude_m;
     let pitch = SURVEY_PITCH_DEG.to_radians();
     let slant_m = altitude_m / pitch.sin();
     let footprint_m = 2.0 * slant_m * (hfov_deg.to_radians() / 2.0).tan();

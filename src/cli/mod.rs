@@ -5,6 +5,7 @@ pub mod ba;
 pub mod config;
 pub mod eval;
 pub mod fragility;
+pub mod localize;
 pub mod map;
 pub mod odometry;
 pub mod plan;
@@ -42,6 +43,9 @@ pub enum Command {
     Eval(eval::EvalArgs),
     /// Track a sequence with RGBD odometry and write its trajectory.
     Odometry(odometry::OdometryArgs),
+    /// Localize targets in a sequence with the bounding-box depth filter (detection → tracking
+    /// → depth filter); writes each target's points, ellipsoid and status.
+    Localize(localize::LocalizeArgs),
     /// Render a camera path through a world into a TUM RGB-D sequence.
     Render(render::RenderArgs),
     /// Write a world's ground-truth meshes and `world.json`.
@@ -67,6 +71,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Simulate(args) => simulate::run(args),
         Command::Eval(args) => eval::run(args),
         Command::Odometry(args) => odometry::run(args),
+        Command::Localize(args) => localize::run(args),
         Command::Render(args) => render::run(args),
         Command::World(args) => world::run(args),
         Command::Config(args) => config::run(args),

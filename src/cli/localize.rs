@@ -1,0 +1,372 @@
+//! `scarp localize`: run detection, tracking and the depth filter over a sequence and write
+//! each target's point set, ellipsoid and status.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use clap::{Args, ValueEnum};
+use nalgebra::Isometry3;
+use rand::SeedableRng;
+use rand::rngs::Xoshiro256PlusPlus;
+use scarp_datasets::sequence::Sequence;
+use scarp_datasets::world::{RockRole, World};
+use scarp_export::atomic::write_bytes_atomically;
+use scarp_export::ply::{PlyEncoding, write_point_cloud};
+use scarp_slam::PointCloud;
+use serde::Serialize;
+
+use crate::detection::BoundingBox;
+use crate::evaluation::mesh::MeshDistance;
+use crate::localization::{LocalizationConfig, Target, TargetCatalog, TargetStatus};
+
+/// Localize targets in a sequence with the bounding-box depth filter.
+#[derive(Debug, Args)]
+pub struct LocalizeArgs {
+    /// Sequence directory (TUM RGB-D layout as written by `scarp render`).
+    pub sequence: PathBuf,
+    /// Where the boxes come from: `groundtruth` (the sequence's `boxes.txt`, targets only, one
+    /// track per rock).
+    #[arg(long, value_enum, default_value_t = DetectorKind::Groundtruth)]
+    pub detector: DetectorKind,
+    /// Camera poses fed to the filter: the noisy state `estimate` or the `groundtruth`.
+    #[arg(long, value_enum, default_value_t = PoseSource::Estimate)]
+    pub poses: PoseSource,
+    /// The world the sequence was rendered from (`default` or a TOML file), for ground truth.
+    #[arg(long, default_value = "default")]
+    pub world: String,
+    /// Skip the comparison with the world's rocks.
+    #[arg(long)]
+    pub no_ground_truth: bool,
+    /// A target matches the nearest true rock whose centroid lies within this distance, m.
+    #[arg(long, default_value_t = 2.0)]
+    pub match_radius_m: f64,
+    /// A TOML file with `LocalizationConfig` fields (missing ones take their defaults).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Seed of the depth filter (and of the simulated detector).
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Output directory: `targets/<id>/points.ply`, `targets/<id>/target.json`,
+    /// `localization.json`.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Print the summary JSON on stdout.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// The source of boxes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DetectorKind {
+    /// Perfect boxes of the target rocks from `boxes.txt`; the rock id is the track id.
+    Groundtruth,
+}
+
+/// Which poses drive the filter.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PoseSource {
+    /// The noisy state estimate (`estimate.txt`).
+    Estimate,
+    /// The true poses (`groundtruth.txt`).
+    Groundtruth,
+}
+
+/// One target in the summary.
+#[derive(Debug, Clone, Serialize)]
+pub struct TargetSummary {
+    /// Catalog id.
+    pub id: u32,
+    /// `tracking`, `ready_for_fine_localization` or `converged`.
+    pub status: TargetStatus,
+    /// Point-set centre C_e, world ENU, m.
+    pub center: [f64; 3],
+    /// Largest covariance eigenvalue, m².
+    pub lambda_max: f64,
+    /// Differential entropy of the Gaussian fit, nats.
+    pub entropy: f64,
+    /// KL divergence of the last update, nats.
+    pub last_kl: Option<f64>,
+    /// The point set, relative to the output directory.
+    pub points: String,
+    /// Number of points.
+    pub point_count: usize,
+    /// Updates applied.
+    pub updates: u32,
+    /// Frames with a box on the target.
+    pub hits: u32,
+    /// The matched true rock, when ground truth is used.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub gt_rock_id: Option<u32>,
+    /// Its role (`target` or `distractor`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub gt_role: Option<&'static str>,
+    /// Distance from the centre to the true rock's centroid, m.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub centroid_error_m: Option<f64>,
+    /// Fraction of points within 0.5 m of the true rock's surface.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fraction_on_surface: Option<f64>,
+}
+
+/// The output of `scarp localize`.
+#[derive(Debug, Clone, Serialize)]
+pub struct LocalizeSummary {
+    /// The sequence read.
+    pub sequence: String,
+    /// Frames processed.
+    pub frames: usize,
+    /// Box source.
+    pub detector: DetectorKind,
+    /// Pose source.
+    pub poses: PoseSource,
+    /// Live targets at the end.
+    pub targets: Vec<TargetSummary>,
+    /// Ids of live targets that match no true rock (only with ground truth).
+    pub false_targets: Vec<u32>,
+    /// Targets removed by the hit/miss counters during the run.
+    pub removed_targets: usize,
+    /// Converged duplicates merged during the run.
+    pub merged_targets: usize,
+    /// Wall time, s.
+    pub seconds: f64,
+}
+
+/// The `world_from_camera` of frame `index` from the chosen source.
+fn frame_pose(
+    seq: &Sequence,
+    index: usize,
+    source: PoseSource,
+) -> anyhow::Result<Isometry3<f64>> {
+    let entry = &seq.entries[index];
+    let pose = match source {
+        PoseSource::Estimate => entry.world_from_camera_estimate,
+        PoseSource::Groundtruth => entry.world_from_camera_truth,
+    };
+    pose.with_context(|| {
+        format!(
+            "{}: frame {index} (t = {:.6} s) has no {} pose",
+            seq.dir.display(),
+            entry.timestamp_s,
+            match source {
+                PoseSource::Estimate => "estimated (estimate.txt)",
+                PoseSource::Groundtruth => "ground-truth (groundtruth.txt)",
+            }
+        )
+    })
+}
+
+/// The boxes `(track id, box)` of frame `index` from `boxes.txt`: target rocks only, matched by
+/// timestamp (within 1 ms).
+fn ground_truth_boxes(seq: &Sequence, index: usize) -> Vec<(u64, BoundingBox)> {
+    let t = seq.entries[index].timestamp_s;
+    seq.boxes
+        .iter()
+        .filter(|b| (b.timestamp_s - t).abs() < 1e-3 && b.role == RockRole::Target)
+        .map(|b| (u64::from(b.id), BoundingBox::from_inclusive_pixels(b.bbox_px)))
+        .collect()
+}
+
+/// Ground-truth comparison of one target: the nearest rock within `radius_m`, the centroid
+/// error and the fraction of points within 0.5 m of its surface.
+fn compare_with_world(
+    target: &Target,
+    world: &World,
+    radius_m: f64,
+) -> anyhow::Result<Option<(u32, &'static str, f64, f64)>> {
+    let c = target.center();
+    let nearest = world
+        .rocks
+        .iter()
+        .map(|r| (r, (r.centroid - c).norm()))
+        .filter(|(_, d)| *d <= radius_m)
+        .min_by(|a, b| a.1.total_cmp(&b.1));
+    let Some((rock, error_m)) = nearest else {
+        return Ok(None);
+    };
+    let distance = MeshDistance::new(&rock.mesh, &[], 16, "rock")
+        .with_context(|| format!("rock {} has an empty mesh", rock.id))?;
+    let on = target
+        .points()
+        .iter()
+        .filter(|p| distance.distance(p) <= 0.5)
+        .count();
+    let fraction = on as f64 / target.points().len().max(1) as f64;
+    Ok(Some((rock.id, rock.role.as_str(), error_m, fraction)))
+}
+
+fn write_target(dir: &Path, summary: &TargetSummary, target: &Target) -> anyhow::Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let cloud = PointCloud::from_positions(target.points().iter().map(|p| p.cast()).collect());
+    let ply = dir.join("points.ply");
+    write_point_cloud(&ply, &cloud, PlyEncoding::BinaryLittleEndian)
+        .with_context(|| format!("writing {}", ply.display()))?;
+    let ellipsoid = target.ellipsoid();
+    let json = serde_json::json!({
+        "id": summary.id,
+        "status": summary.status,
+        "center": summary.center,
+        "covariance": target.covariance(),
+        "ellipsoid": {
+            "center": [ellipsoid.center.x, ellipsoid.center.y, ellipsoid.center.z],
+            "axes_world": ellipsoid.world_from_ellipsoid.matrix(),
+            "eigenvalues_m2": ellipsoid.eigenvalues_m2,
+            "semi_axes_m": ellipsoid.semi_axes_m,
+        },
+        "lambda_max": summary.lambda_max,
+        "entropy": summary.entropy,
+        "last_kl": summary.last_kl,
+        "updates": summary.updates,
+        "hits": summary.hits,
+        "gt_rock_id": summary.gt_rock_id,
+        "centroid_error_m": summary.centroid_error_m,
+        "fraction_on_surface": summary.fraction_on_surface,
+    });
+    let path = dir.join("target.json");
+    write_bytes_atomically(&path, serde_json::to_string_pretty(&json)?.as_bytes())
+        .with_context(|| format!("writing {}", path.display()))?;
+    Ok(())
+}
+
+/// Runs the depth filter over a sequence and writes the outputs.
+///
+/// # Errors
+/// Unreadable sequence, world or config; a frame without the chosen pose; bad boxes or poses
+/// (named by frame); write failures.
+pub fn localize(args: &LocalizeArgs) -> anyhow::Result<LocalizeSummary> {
+    let started = std::time::Instant::now();
+    let seq = Sequence::open(&args.sequence)
+        .with_context(|| format!("opening sequence {}", args.sequence.display()))?;
+    let config = match &args.config {
+        Some(path) => {
+            let text = std::fs::read_to_string(path)
+                .with_context(|| format!("reading {}", path.display()))?;
+            toml::from_str::<LocalizationConfig>(&text)
+                .with_context(|| format!("parsing {}", path.display()))?
+        }
+        None => LocalizationConfig::default(),
+    };
+    let world = if args.no_ground_truth {
+        None
+    } else {
+        Some(
+            World::from_name_or_path(&args.world)
+                .with_context(|| format!("loading world `{}`", args.world))?,
+        )
+    };
+    let mut catalog = TargetCatalog::new(config)?;
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(args.seed);
+    let mut merged = 0;
+    let bar = super::progress_bar(seq.len() as u64, "localizing");
+    for index in 0..seq.len() {
+        let world_from_camera = frame_pose(&seq, index, args.poses)?;
+        let boxes = match args.detector {
+            DetectorKind::Groundtruth => ground_truth_boxes(&seq, index),
+        };
+        let report = catalog
+            .observe(&seq.camera, &world_from_camera, &boxes, &mut rng)
+            .with_context(|| format!("frame {index} of {}", seq.dir.display()))?;
+        for id in &report.registered {
+            tracing::debug!(frame = index, target = id, "registered");
+        }
+        for id in &report.removed {
+            tracing::debug!(frame = index, target = id, "removed as false");
+        }
+        merged += report.merged.len();
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+
+    let mut targets = Vec::new();
+    let mut false_targets = Vec::new();
+    for target in catalog.targets() {
+        let c = target.center();
+        let mut summary = TargetSummary {
+            id: target.id(),
+            status: target.status(),
+            center: [c.x, c.y, c.z],
+            lambda_max: target.lambda_max(),
+            entropy: target.entropy_nats(),
+            last_kl: target.last_kl_nats(),
+            points: format!("targets/{}/points.ply", target.id()),
+            point_count: target.points().len(),
+            updates: target.updates(),
+            hits: target.hits(),
+            gt_rock_id: None,
+            gt_role: None,
+            centroid_error_m: None,
+            fraction_on_surface: None,
+        };
+        if let Some(world) = &world {
+            match compare_with_world(target, world, args.match_radius_m)? {
+                Some((rock, role, error_m, fraction)) => {
+                    summary.gt_rock_id = Some(rock);
+                    summary.gt_role = Some(role);
+                    summary.centroid_error_m = Some(error_m);
+                    summary.fraction_on_surface = Some(fraction);
+                }
+                None => false_targets.push(target.id()),
+            }
+        }
+        write_target(
+            &args.out.join("targets").join(target.id().to_string()),
+            &summary,
+            target,
+        )?;
+        targets.push(summary);
+    }
+    let summary = LocalizeSummary {
+        sequence: args.sequence.display().to_string(),
+        frames: seq.len(),
+        detector: args.detector,
+        poses: args.poses,
+        targets,
+        false_targets,
+        removed_targets: catalog.removed_count(),
+        merged_targets: merged,
+        seconds: started.elapsed().as_secs_f64(),
+    };
+    let path = args.out.join("localization.json");
+    write_bytes_atomically(&path, serde_json::to_string_pretty(&summary)?.as_bytes())
+        .with_context(|| format!("writing {}", path.display()))?;
+    Ok(summary)
+}
+
+/// Runs `scarp localize`.
+///
+/// # Errors
+/// As [`localize`].
+pub fn run(args: LocalizeArgs) -> anyhow::Result<()> {
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating {}", args.out.display()))?;
+    let summary = localize(&args)?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&summary)?);
+    } else {
+        for t in &summary.targets {
+            eprintln!(
+                "target {}: {} at ({:.2}, {:.2}, {:.2}) m, h = {:.2}, λ_max = {:.3} m²{}",
+                t.id,
+                t.status.as_str(),
+                t.center[0],
+                t.center[1],
+                t.center[2],
+                t.entropy,
+                t.lambda_max,
+                t.centroid_error_m
+                    .map(|e| format!(", {e:.2} m from rock {}", t.gt_rock_id.unwrap_or(0)))
+                    .unwrap_or_default()
+            );
+        }
+        eprintln!(
+            "{} frames, {} targets, {} false, {} removed, {:.1} s",
+            summary.frames,
+            summary.targets.len(),
+            summary.false_targets.len(),
+            summary.removed_targets,
+            summary.seconds
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,424 @@
+//! The registry of targets: registration against the boxes of a frame (new target or update),
+//! keyframe-gated updates, removal of false targets with hit and miss counters, and merging of
+//! converged duplicates.
+
+use nalgebra::{Isometry3, Point3};
+use scarp_slam::PinholeCamera;
+use serde::{Deserialize, Serialize};
+
+use super::cone::BoxCone;
+use super::keyframe::is_keyframe;
+use super::points::generate_points;
+use super::target::{Target, TargetStatus};
+use super::update::{BoxLikelihood, low_variance_resample, update_points};
+use super::{LocalizationConfig, LocalizationError, check_box, check_pose};
+use crate::detection::BoundingBox;
+
+/// What one call of [`TargetCatalog::observe`] did, by target id.
+#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ObserveReport {
+    /// Targets registered from boxes whose cone held no point of any target.
+    pub registered: Vec<u32>,
+    /// Existing targets a box matched (hits) in this frame.
+    pub matched: Vec<u32>,
+    /// Matched targets whose points were updated (the frame was a keyframe for them).
+    pub updated: Vec<u32>,
+    /// Matched targets not updated on a keyframe because no noised point had any weight.
+    pub unsupported: Vec<u32>,
+    /// Unconfirmed targets removed for too many misses.
+    pub removed: Vec<u32>,
+    /// `(kept, absorbed)` pairs of converged targets merged for being closer than the merge
+    /// distance.
+    pub merged: Vec<(u32, u32)>,
+}
+
+/// All targets of a flight, in order of registration.
+#[derive(Debug, Clone)]
+pub struct TargetCatalog {
+    config: LocalizationConfig,
+    targets: Vec<Target>,
+    next_id: u32,
+    removed_count: usize,
+}
+
+impl TargetCatalog {
+    /// An empty catalog.
+    ///
+    /// # Errors
+    /// [`LocalizationError::InvalidConfig`] for a bad configuration.
+    pub fn new(config: LocalizationConfig) -> Result<Self, LocalizationError> {
+        config.validate()?;
+        Ok(Self {
+            config,
+            targets: Vec::new(),
+            next_id: 1,
+            removed_count: 0,
+        })
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &LocalizationConfig {
+        &self.config
+    }
+
+    /// The live targets, in order of registration.
+    pub fn targets(&self) -> &[Target] {
+        &self.targets
+    }
+
+    /// The target with this id, if it is alive.
+    pub fn target(&self, id: u32) -> Option<&Target> {
+        self.targets.iter().find(|t| t.id == id)
+    }
+
+    /// How many targets were removed as false so far.
+    pub fn removed_count(&self) -> usize {
+        self.removed_count
+    }
+
+    /// Processes the tracked boxes `(track id, box)` of one frame taken by `camera` at
+    /// `world_from_camera`.
+    ///
+    /// Each box's enlarged cone is tested against every target's points (N·L > 0). Boxes and
+    /// targets are paired greedily, the track's previous target first, then by the number of
+    /// points inside; each target takes at most one box per frame. A paired target scores a hit
+    /// and, when the camera moved or turned enough since its last update, is updated
+    /// (Algorithm 3). An unpaired box registers a new target (Algorithm 2). Targets without a
+    /// box whose centre is in view score a miss; unconfirmed targets with too many misses are
+    /// removed. Converged targets closer than the merge distance are merged.
+    ///
+    /// Deterministic for a given `rng` state; boxes are processed in the given order.
+    ///
+    /// # Errors
+    /// Invalid camera, non-finite pose, or a box that is degenerate or outside the image;
+    /// nothing is changed then.
+    pub fn observe<R: rand::Rng + ?Sized>(
+        &mut self,
+        camera: &PinholeCamera,
+        world_from_camera: &Isometry3<f64>,
+        boxes: &[(u64, BoundingBox)],
+        rng: &mut R,
+    ) -> Result<ObserveReport, LocalizationError> {
+        camera.validate()?;
+        check_pose(world_from_camera, "world_from_camera")?;
+        for (index, (_, bbox)) in boxes.iter().enumerate() {
+            check_box(bbox, index, camera.width, camera.height)?;
+        }
+        let cfg = self.config;
+        let camera_from_world = world_from_camera.inverse();
+        let enlarged: Vec<BoundingBox> = boxes
+            .iter()
+            .map(|(_, b)| b.enlarged(cfg.box_enlargement_px))
+            .collect();
+
+        // Candidate pairs (box, target, points inside, same track).
+        let mut pairs = Vec::new();
+        for (bi, e) in enlarged.iter().enumerate() {
+            let cone = BoxCone::new(camera, e);
+            for (ti, t) in self.targets.iter().enumerate() {
+                let inside = t
+                    .points
+                    .iter()
+                    .filter(|p| cone.contains(&(camera_from_world * *p)))
+                    .count();
+                if inside >= cfg.min_points_in_cone {
+                    let same_track = t.last_track_id == Some(boxes[bi].0);
+                    pairs.push((bi, ti, inside, same_track));
+                }
+            }
+        }
+        pairs.sort_by(|a, b| {
+            b.3.cmp(&a.3)
+                .then(b.2.cmp(&a.2))
+                .then(a.0.cmp(&b.0))
+                .then(a.1.cmp(&b.1))
+        });
+        let mut box_target: Vec<Option<usize>> = vec![None; boxes.len()];
+        let mut target_taken = vec![false; self.targets.len()];
+        for &(bi, ti, _, _) in &pairs {
+            if box_target[bi].is_none() && !target_taken[ti] {
+                box_target[bi] = Some(ti);
+                target_taken[ti] = true;
+            }
+        }
+
+        let mut report = ObserveReport::default();
+        // Updates and registrations, in box order.
+        let mut new_targets = Vec::new();
+        for (bi, (track_id, bbox)) in boxes.iter().enumerate() {
+            match box_target[bi] {
+                Some(ti) => {
+                    let t = &mut self.targets[ti];
+                    t.hits += 1;
+                    t.misses = 0;
+                    t.last_track_id = Some(*track_id);
+                    report.matched.push(t.id);
+                    if is_keyframe(
+                        &t.last_update_world_from_camera,
+                        world_from_camera,
+                        cfg.keyframe_translation_m,
+                        cfg.keyframe_rotation_deg,
+                    ) {
+                        let likelihood = BoxLikelihood {
+                            bbox: *bbox,
+                            enlarged: enlarged[bi],
+                            gaussian_weight: cfg.gaussian_weight,
+                            uniform_weight: cfg.uniform_weight,
+                        };
+                        match update_points(
+                            &t.points,
+                            camera,
+                            world_from_camera,
+                            &likelihood,
+                            cfg.update_noise_sigma_m,
+                            rng,
+                        ) {
+                            Some(points) => {
+                                t.apply_update(points, *world_from_camera, &cfg)?;
+                                report.updated.push(t.id);
+                            }
+                            None => report.unsupported.push(t.id),
+                        }
+                    }
+                }
+                None => {
+                    let points = generate_points(
+                        camera,
+                        world_from_camera,
+                        &enlarged[bi],
+                        cfg.points_per_target,
+                        cfg.min_depth_m,
+                        cfg.max_depth_m,
+                        rng,
+                    );
+                    let id = self.next_id;
+                    self.next_id += 1;
+                    new_targets.push(Target::new(
+                        id,
+                        points,
+                        *world_from_camera,
+                        Some(*track_id),
+                    )?);
+                    report.registered.push(id);
+                }
+            }
+        }
+
+        // Misses for targets in view without a box; remove unconfirmed ones with too many.
+        for (ti, t) in self.targets.iter_mut().enumerate() {
+            if target_taken[ti] {
+                continue;
+            }
+            let c = camera_from_world * t.center();
+            let in_view = c.z > 0.0
+                && c.z <= cfg.max_depth_m
+                && camera.project(&c).is_some_and(|px| camera.in_bounds(&px, 0.0));
+            if in_view {
+                t.misses += 1;
+            }
+        }
+        let before = self.targets.len();
+        self.targets.retain(|t| {
+            let remove = t.misses >= cfg.max_misses && t.hits < cfg.confirm_hits;
+            if remove {
+                report.removed.push(t.id);
+            }
+            !remove
+        });
+        self.removed_count += before - self.targets.len();
+        self.targets.extend(new_targets);
+
+        report.merged = self.merge_converged(rng);
+        Ok(report)
+    }
+
+    /// Merges converged targets whose centres are closer than the merge distance: the older
+    /// target keeps its id and status and takes the union of both point sets, resampled
+    /// (low-variance, equal weights) back to its size; counters add up.
+    fn merge_converged<R: rand::Rng + ?Sized>(&mut self, rng: &mut R) -> Vec<(u32, u32)> {
+        let mut merged = Vec::new();
+        let mut i = 0;
+        while i < self.targets.len() {
+            let mut j = i + 1;
+            while j < self.targets.len() {
+                let (a, b) = (&self.targets[i], &self.targets[j]);
+                let close = (a.center() - b.center()).norm() < self.config.merge_distance_m;
+                if a.status == TargetStatus::Converged && b.status == TargetStatus::Converged && close
+                {
+                    let absorbed = self.targets.remove(j);
+                    let kept = &mut self.targets[i];
+                    let union: Vec<Point3<f64>> =
+                        kept.points.iter().chain(&absorbed.points).copied().collect();
+                    let weights = vec![1.0; union.len()];
+                    if let Some(picks) = low_variance_resample(&weights, kept.points.len(), rng)
+                    {
+                        let points: Vec<_> = picks.into_iter().map(|k| union[k]).collect();
+                        if let Ok(g) = super::Gaussian3::from_points(&points) {
+                            kept.points = points;
+                            kept.gaussian = g;
+                        }
+                    }
+                    kept.hits += absorbed.hits;
+                    merged.push((kept.id, absorbed.id));
+                } else {
+                    j += 1;
+                }
+            }
+            i += 1;
+        }
+        merged
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{Point2, Vector3};
+    use rand::SeedableRng;
+    use rand::rngs::Xoshiro256PlusPlus;
+    use scarp_slam::geometry::look_at;
+
+    fn camera() -> PinholeCamera {
+        PinholeCamera::from_hfov(640, 480, 80.0).unwrap()
+    }
+
+    /// The box of a sphere of `radius_m` around `centre` seen from `world_from_camera`.
+    fn sphere_box(
+        cam: &PinholeCamera,
+        world_from_camera: &Isometry3<f64>,
+        centre: &Point3<f64>,
+        radius_m: f64,
+    ) -> BoundingBox {
+        let c = world_from_camera.inverse() * centre;
+        let px = cam.project(&c).unwrap();
+        let r_px = cam.fx * radius_m / c.z;
+        BoundingBox::new(px.x - r_px, px.y - r_px, px.x + r_px, px.y + r_px).unwrap()
+    }
+
+    /// Cameras on a circle of radius 8 m, 8 m above `centre`, looking at it.
+    fn circle_pose(centre: &Point3<f64>, k: usize, n: usize) -> Isometry3<f64> {
+        let a = k as f64 / n as f64 * std::f64::consts::TAU;
+        let eye = centre + Vector3::new(8.0 * a.cos(), 8.0 * a.sin(), 8.0);
+        look_at(&eye, centre, &Vector3::z()).unwrap()
+    }
+
+    #[test]
+    fn circle_of_views_localizes_and_converges() {
+        let cam = camera();
+        let rock = Point3::new(3.0, -2.0, 1.0);
+        let mut catalog = TargetCatalog::new(LocalizationConfig::default()).unwrap();
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(1);
+        let n = 60;
+        for k in 0..2 * n {
+            let pose = circle_pose(&rock, k, n);
+            let bbox = sphere_box(&cam, &pose, &rock, 0.5);
+            catalog.observe(&cam, &pose, &[(7, bbox)], &mut rng).unwrap();
+        }
+        assert_eq!(catalog.targets().len(), 1);
+        let t = &catalog.targets()[0];
+        assert!((t.center() - rock).norm() < 0.3, "{}", t.center());
+        assert_eq!(t.status(), TargetStatus::Converged);
+        assert!(t.entropy_nats() < 3.0);
+    }
+
+    #[test]
+    fn sporadic_false_box_is_removed_and_real_target_survives() {
+        let cam = camera();
+        let rock = Point3::new(0.0, 0.0, 0.0);
+        let mut catalog = TargetCatalog::new(LocalizationConfig::default()).unwrap();
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(2);
+        let n = 60;
+        let mut removed = Vec::new();
+        for k in 0..n {
+            let pose = circle_pose(&rock, k, n);
+            let mut boxes = vec![(1, sphere_box(&cam, &pose, &rock, 0.5))];
+            if k == 10 {
+                boxes.push((99, BoundingBox::new(20.0, 20.0, 60.0, 50.0).unwrap()));
+            }
+            let report = catalog.observe(&cam, &pose, &boxes, &mut rng).unwrap();
+            removed.extend(report.removed);
+        }
+        assert_eq!(removed, vec![2]);
+        assert_eq!(catalog.targets().len(), 1);
+        assert_eq!(catalog.targets()[0].id(), 1);
+        assert_eq!(catalog.removed_count(), 1);
+    }
+
+    #[test]
+    fn same_seed_same_result() {
+        let cam = camera();
+        let rock = Point3::new(1.0, 1.0, 0.0);
+        let run = || {
+            let mut catalog = TargetCatalog::new(LocalizationConfig::default()).unwrap();
+            let mut rng = Xoshiro256PlusPlus::seed_from_u64(5);
+            for k in 0..30 {
+                let pose = circle_pose(&rock, k, 30);
+                let bbox = sphere_box(&cam, &pose, &rock, 0.5);
+                catalog.observe(&cam, &pose, &[(1, bbox)], &mut rng).unwrap();
+            }
+            catalog.targets()[0].points().to_vec()
+        };
+        assert_eq!(run(), run());
+    }
+
+    #[test]
+    fn bad_input_is_rejected_with_clear_errors() {
+        let cam = camera();
+        let mut catalog = TargetCatalog::new(LocalizationConfig::default()).unwrap();
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(0);
+        let ok = BoundingBox::new(10.0, 10.0, 50.0, 50.0).unwrap();
+        let zero_area = BoundingBox {
+            x_min: 10.0,
+            y_min: 10.0,
+            x_max: 10.0,
+            y_max: 50.0,
+        };
+        let err = catalog
+            .observe(&cam, &Isometry3::identity(), &[(1, ok), (2, zero_area)], &mut rng)
+            .unwrap_err();
+        assert!(matches!(err, LocalizationError::InvalidBox { index: 1, .. }), "{err}");
+        assert!(err.to_string().contains("zero or negative area"));
+        let outside = BoundingBox::new(700.0, 10.0, 750.0, 50.0).unwrap();
+        let err = catalog
+            .observe(&cam, &Isometry3::identity(), &[(1, outside)], &mut rng)
+            .unwrap_err();
+        assert!(matches!(err, LocalizationError::BoxOutsideImage { .. }), "{err}");
+        let nan_box = BoundingBox {
+            x_min: f64::NAN,
+            ..ok
+        };
+        assert!(catalog
+            .observe(&cam, &Isometry3::identity(), &[(1, nan_box)], &mut rng)
+            .is_err());
+        let mut nan_pose = Isometry3::identity();
+        nan_pose.translation.vector.x = f64::NAN;
+        let err = catalog.observe(&cam, &nan_pose, &[(1, ok)], &mut rng).unwrap_err();
+        assert!(matches!(err, LocalizationError::NonFinitePose { .. }), "{err}");
+        assert!(err.to_string().contains("world_from_camera"));
+        // Nothing was registered by the failed calls.
+        assert!(catalog.targets().is_empty());
+        let _ = Point2::new(0.0, 0.0);
+    }
+
+    #[test]
+    fn converged_duplicates_merge() {
+        let cam = camera();
+        let cfg = LocalizationConfig::default();
+        let mut catalog = TargetCatalog::new(cfg).unwrap();
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(3);
+        let make = |id, offset: f64| {
+            let pts: Vec<_> = (0..100)
+                .map(|i| Point3::new(offset + 0.01 * (i % 10) as f64, 0.01 * (i / 10) as f64, 0.003 * (i % 7) as f64))
+                .collect();
+            let mut t = Target::new(id, pts, Isometry3::identity(), None).unwrap();
+            t.status = TargetStatus::Converged;
+            t
+        };
+        catalog.targets = vec![make(1, 0.0), make(2, 0.5), make(3, 5.0)];
+        let merged = catalog.merge_converged(&mut rng);
+        assert_eq!(merged, vec![(1, 2)]);
+        assert_eq!(catalog.targets().len(), 2);
+        assert_eq!(catalog.targets()[0].points().len(), 100);
+        let _ = cam;
+    }
+}

@@ -1,0 +1,217 @@
+//! Tunables of the depth filter, with the defaults of the paper and its code (DESIGN.md).
+
+use serde::{Deserialize, Serialize};
+
+use super::LocalizationError;
+
+/// Every tunable of target localization. Defaults come from DESIGN.md ("Defaults from the paper
+/// and its code"); the hit/miss counters are ours.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct LocalizationConfig {
+    /// Points per target (the paper's m). Default 2000 (DESIGN; the paper used 1000).
+    pub points_per_target: usize,
+    /// Margin added on every side of a tracked box before generating and weighting points, px.
+    /// Default 30 (seed code).
+    pub box_enlargement_px: f64,
+    /// Nearest depth of generated points along the camera z axis, m. Default 3.
+    pub min_depth_m: f64,
+    /// Farthest depth of generated points along the camera z axis (the paper's d_m), m.
+    /// Default 18.
+    pub max_depth_m: f64,
+    /// Standard deviation of the isotropic noise added to every point before weighting
+    /// (Algorithm 3), m. Default 0.1.
+    pub update_noise_sigma_m: f64,
+    /// Weight w1 of the Gaussian centred on the box (σ = half its width and height). Default 0.2.
+    pub gaussian_weight: f64,
+    /// Weight w2 of the uniform density over the enlarged box. Default 0.8.
+    pub uniform_weight: f64,
+    /// A target is updated only when the camera has moved more than this since its last update,
+    /// m. Default 1.5.
+    pub keyframe_translation_m: f64,
+    /// ... or turned more than this (the angle of the relative rotation, so always wrapped to
+    /// [0°, 180°]), degrees. Default 30.
+    pub keyframe_rotation_deg: f64,
+    /// A target whose point-set differential entropy h_p (nats) falls below this is ready for
+    /// fine localization. Default 3.0.
+    pub ready_entropy_nats: f64,
+    /// KL divergence (nats) between successive Gaussian fits counted as "no change". Default 0.01.
+    pub converged_kl_nats: f64,
+    /// Updates in a row with KL at most [`Self::converged_kl_nats`] for convergence. Default 3.
+    pub converged_updates: u32,
+    /// Converged targets whose centres are closer than this merge, m. Default 1.0.
+    pub merge_distance_m: f64,
+    /// Frames with a box on a target (hits) after which it is confirmed and never removed for
+    /// misses. Default 5.
+    pub confirm_hits: u32,
+    /// An unconfirmed target is removed after this many frames in which its centre was in view
+    /// (inside the image, in front of the camera, within `max_depth_m`) but no box matched it
+    /// (misses). Default 3.
+    pub max_misses: u32,
+    /// A box updates an existing target when at least this many of its points satisfy the box's
+    /// four inward half-spaces (N·L > 0); otherwise it registers a new target. Default 1 (the
+    /// paper: "any point").
+    pub min_points_in_cone: usize,
+}
+
+impl Default for LocalizationConfig {
+    fn default() -> Self {
+        Self {
+            points_per_target: 2000,
+            box_enlargement_px: 30.0,
+            min_depth_m: 3.0,
+            max_depth_m: 18.0,
+            update_noise_sigma_m: 0.1,
+            gaussian_weight: 0.2,
+            uniform_weight: 0.8,
+            keyframe_translation_m: 1.5,
+            keyframe_rotation_deg: 30.0,
+            ready_entropy_nats: 3.0,
+            converged_kl_nats: 0.01,
+            converged_updates: 3,
+            merge_distance_m: 1.0,
+            confirm_hits: 5,
+            max_misses: 3,
+            min_points_in_cone: 1,
+        }
+    }
+}
+
+impl LocalizationConfig {
+    /// Checks every field.
+    ///
+    /// # Errors
+    /// [`LocalizationError::InvalidConfig`] naming the first bad field.
+    pub fn validate(&self) -> Result<(), LocalizationError> {
+        let bad = |field: &'static str, value: f64, reason: &'static str| {
+            Err(LocalizationError::InvalidConfig {
+                field,
+                value,
+                reason,
+            })
+        };
+        let positive = |v: f64| v.is_finite() && v > 0.0;
+        let non_negative = |v: f64| v.is_finite() && v >= 0.0;
+        if self.points_per_target < 4 {
+            return bad(
+                "points_per_target",
+                self.points_per_target as f64,
+                "must be at least 4",
+            );
+        }
+        if !non_negative(self.box_enlargement_px) {
+            return bad(
+                "box_enlargement_px",
+                self.box_enlargement_px,
+                "must be finite and ≥ 0",
+            );
+        }
+        if !positive(self.min_depth_m) {
+            return bad("min_depth_m", self.min_depth_m, "must be finite and > 0");
+        }
+        if !(self.max_depth_m.is_finite() && self.max_depth_m > self.min_depth_m) {
+            return bad(
+                "max_depth_m",
+                self.max_depth_m,
+                "must be finite and above min_depth_m",
+            );
+        }
+        if !non_negative(self.update_noise_sigma_m) {
+            return bad(
+                "update_noise_sigma_m",
+                self.update_noise_sigma_m,
+                "must be finite and ≥ 0",
+            );
+        }
+        if !non_negative(self.gaussian_weight) {
+            return bad(
+                "gaussian_weight",
+                self.gaussian_weight,
+                "must be finite and ≥ 0",
+            );
+        }
+        if !non_negative(self.uniform_weight) {
+            return bad("uniform_weight", self.uniform_weight, "must be finite and ≥ 0");
+        }
+        if self.gaussian_weight + self.uniform_weight <= 0.0 {
+            return bad(
+                "uniform_weight",
+                self.uniform_weight,
+                "gaussian_weight + uniform_weight must be > 0",
+            );
+        }
+        if !non_negative(self.keyframe_translation_m) {
+            return bad(
+                "keyframe_translation_m",
+                self.keyframe_translation_m,
+                "must be finite and ≥ 0",
+            );
+        }
+        if !non_negative(self.keyframe_rotation_deg) {
+            return bad(
+                "keyframe_rotation_deg",
+                self.keyframe_rotation_deg,
+                "must be finite and ≥ 0",
+            );
+        }
+        if !self.ready_entropy_nats.is_finite() {
+            return bad(
+                "ready_entropy_nats",
+                self.ready_entropy_nats,
+                "must be finite",
+            );
+        }
+        if !non_negative(self.converged_kl_nats) {
+            return bad(
+                "converged_kl_nats",
+                self.converged_kl_nats,
+                "must be finite and ≥ 0",
+            );
+        }
+        if self.converged_updates == 0 {
+            return bad("converged_updates", 0.0, "must be at least 1");
+        }
+        if !non_negative(self.merge_distance_m) {
+            return bad(
+                "merge_distance_m",
+                self.merge_distance_m,
+                "must be finite and ≥ 0",
+            );
+        }
+        if self.max_misses == 0 {
+            return bad("max_misses", 0.0, "must be at least 1");
+        }
+        if self.min_points_in_cone == 0 {
+            return bad("min_points_in_cone", 0.0, "must be at least 1");
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_are_valid_and_match_design() {
+        let c = LocalizationConfig::default();
+        c.validate().unwrap();
+        assert_eq!(c.points_per_target, 2000);
+        assert_eq!((c.min_depth_m, c.max_depth_m), (3.0, 18.0));
+        assert_eq!((c.gaussian_weight, c.uniform_weight), (0.2, 0.8));
+    }
+
+    #[test]
+    fn bad_fields_are_named() {
+        let c = LocalizationConfig {
+            max_depth_m: 2.0,
+            ..Default::default()
+        };
+        let err = c.validate().unwrap_err();
+        assert!(err.to_string().contains("max_depth_m"), "{err}");
+        let toml_text = "points_per_target = 500\n";
+        let c: LocalizationConfig = toml::from_str(toml_text).unwrap();
+        assert_eq!(c.points_per_target, 500);
+        assert_eq!(c.max_misses, 3);
+    }
+}

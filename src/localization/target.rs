@@ -1,0 +1,245 @@
+//! One target: its point set, Gaussian fit, counters and status.
+
+use nalgebra::{Isometry3, Point3};
+use serde::{Deserialize, Serialize};
+
+use super::LocalizationConfig;
+use super::gaussian::{Ellipsoid, Gaussian3};
+
+/// Where a target stands. Statuses only move forward.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TargetStatus {
+    /// Points are being filtered; the set is still spread out.
+    Tracking,
+    /// The point-set entropy h_p fell below the threshold: plan the fine-localization circle.
+    ReadyForFineLocalization,
+    /// KL between successive fits stayed at or below the threshold for the configured number of
+    /// updates in a row (while ready).
+    Converged,
+}
+
+impl TargetStatus {
+    /// `tracking`, `ready_for_fine_localization` or `converged`.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Tracking => "tracking",
+            Self::ReadyForFineLocalization => "ready_for_fine_localization",
+            Self::Converged => "converged",
+        }
+    }
+}
+
+/// A target of the depth filter. Points are world ENU, metres.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Target {
+    pub(crate) id: u32,
+    pub(crate) status: TargetStatus,
+    pub(crate) points: Vec<Point3<f64>>,
+    pub(crate) gaussian: Gaussian3,
+    pub(crate) last_kl_nats: Option<f64>,
+    pub(crate) small_kl_streak: u32,
+    pub(crate) updates: u32,
+    pub(crate) hits: u32,
+    pub(crate) misses: u32,
+    pub(crate) last_update_world_from_camera: Isometry3<f64>,
+    pub(crate) last_track_id: Option<u64>,
+}
+
+impl Target {
+    /// A new target from freshly generated `points` (at least 2, finite), seen by a camera at
+    /// `world_from_camera` (its first keyframe).
+    ///
+    /// # Errors
+    /// [`super::LocalizationError::TooFewPoints`] when the points cannot be fitted.
+    pub fn new(
+        id: u32,
+        points: Vec<Point3<f64>>,
+        world_from_camera: Isometry3<f64>,
+        track_id: Option<u64>,
+    ) -> Result<Self, super::LocalizationError> {
+        let gaussian = Gaussian3::from_points(&points)?;
+        Ok(Self {
+            id,
+            status: TargetStatus::Tracking,
+            points,
+            gaussian,
+            last_kl_nats: None,
+            small_kl_streak: 0,
+            updates: 0,
+            hits: 1,
+            misses: 0,
+            last_update_world_from_camera: world_from_camera,
+            last_track_id: track_id,
+        })
+    }
+
+    /// Replaces the points after an update and advances the status: KL of the new fit against
+    /// the previous one, the small-KL streak, then Tracking → ReadyForFineLocalization
+    /// (h_p < `ready_entropy_nats`) → Converged (`converged_updates` updates in a row with KL ≤
+    /// `converged_kl_nats`, while ready).
+    ///
+    /// # Errors
+    /// [`super::LocalizationError::TooFewPoints`] when the new points cannot be fitted; the
+    /// target is then left unchanged.
+    pub fn apply_update(
+        &mut self,
+        points: Vec<Point3<f64>>,
+        world_from_camera: Isometry3<f64>,
+        config: &LocalizationConfig,
+    ) -> Result<(), super::LocalizationError> {
+        let gaussian = Gaussian3::from_points(&points)?;
+        let kl = gaussian.kl_divergence(&self.gaussian);
+        self.points = points;
+        self.gaussian = gaussian;
+        self.last_kl_nats = Some(kl);
+        self.updates += 1;
+        self.last_update_world_from_camera = world_from_camera;
+        if kl <= config.converged_kl_nats {
+            self.small_kl_streak += 1;
+        } else {
+            self.small_kl_streak = 0;
+        }
+        self.advance_status(config);
+        Ok(())
+    }
+
+    fn advance_status(&mut self, config: &LocalizationConfig) {
+        if self.status == TargetStatus::Tracking
+            && self.gaussian.entropy_nats() < config.ready_entropy_nats
+        {
+            self.status = TargetStatus::ReadyForFineLocalization;
+        }
+        if self.status == TargetStatus::ReadyForFineLocalization
+            && self.small_kl_streak >= config.converged_updates
+        {
+            self.status = TargetStatus::Converged;
+        }
+    }
+
+    /// The catalog's id of this target (1, 2, … in order of registration).
+    pub fn id(&self) -> u32 {
+        self.id
+    }
+
+    /// Current status.
+    pub fn status(&self) -> TargetStatus {
+        self.status
+    }
+
+    /// The point set, world frame, m.
+    pub fn points(&self) -> &[Point3<f64>] {
+        &self.points
+    }
+
+    /// The Gaussian fit of the points.
+    pub fn gaussian(&self) -> &Gaussian3 {
+        &self.gaussian
+    }
+
+    /// Mean of the points (C_e), world frame, m.
+    pub fn center(&self) -> Point3<f64> {
+        self.gaussian.mean
+    }
+
+    /// Covariance of the points, m².
+    pub fn covariance(&self) -> nalgebra::Matrix3<f64> {
+        self.gaussian.covariance
+    }
+
+    /// PCA ellipsoid of the points (right-handed).
+    pub fn ellipsoid(&self) -> Ellipsoid {
+        self.gaussian.ellipsoid()
+    }
+
+    /// Largest covariance eigenvalue λ_max, m².
+    pub fn lambda_max(&self) -> f64 {
+        self.gaussian.lambda_max()
+    }
+
+    /// Differential entropy h_p of the Gaussian fit, nats.
+    pub fn entropy_nats(&self) -> f64 {
+        self.gaussian.entropy_nats()
+    }
+
+    /// KL divergence of the last update against the fit before it, nats; `None` before the
+    /// first update.
+    pub fn last_kl_nats(&self) -> Option<f64> {
+        self.last_kl_nats
+    }
+
+    /// Updates applied (keyframes with a box on this target).
+    pub fn updates(&self) -> u32 {
+        self.updates
+    }
+
+    /// Frames in which a box matched this target.
+    pub fn hits(&self) -> u32 {
+        self.hits
+    }
+
+    /// Frames in a row in which the target was in view but no box matched it.
+    pub fn misses(&self) -> u32 {
+        self.misses
+    }
+
+    /// Whether the target has enough hits never to be removed for misses.
+    pub fn is_confirmed(&self, config: &LocalizationConfig) -> bool {
+        self.hits >= config.confirm_hits
+    }
+
+    /// The camera pose of the last update (or of registration), `world_from_camera`.
+    pub fn last_update_world_from_camera(&self) -> &Isometry3<f64> {
+        &self.last_update_world_from_camera
+    }
+
+    /// The tracker's id of the last box that matched this target.
+    pub fn last_track_id(&self) -> Option<u64> {
+        self.last_track_id
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Vector3;
+
+    fn cube(scale: f64, offset: f64) -> Vec<Point3<f64>> {
+        let mut v = Vec::new();
+        for i in 0..10 {
+            for j in 0..10 {
+                for k in 0..10 {
+                    let p = Vector3::new(i as f64, j as f64, k as f64 * 1.1) * scale;
+                    v.push(Point3::from(p + Vector3::repeat(offset)));
+                }
+            }
+        }
+        v
+    }
+
+    #[test]
+    fn status_moves_to_ready_then_converged() {
+        let cfg = LocalizationConfig::default();
+        let mut t = Target::new(1, cube(1.0, 0.0), Isometry3::identity(), Some(4)).unwrap();
+        assert_eq!(t.status(), TargetStatus::Tracking);
+        // Compact but changing: ready, not converged.
+        t.apply_update(cube(0.05, 0.0), Isometry3::identity(), &cfg).unwrap();
+        assert_eq!(t.status(), TargetStatus::ReadyForFineLocalization);
+        t.apply_update(cube(0.05, 0.0), Isometry3::identity(), &cfg).unwrap();
+        t.apply_update(cube(0.05, 0.0), Isometry3::identity(), &cfg).unwrap();
+        assert_eq!(t.status(), TargetStatus::ReadyForFineLocalization);
+        // A jump resets the streak.
+        t.apply_update(cube(0.05, 1.0), Isometry3::identity(), &cfg).unwrap();
+        assert!(t.last_kl_nats().unwrap() > 1.0);
+        for _ in 0..2 {
+            t.apply_update(cube(0.05, 1.0), Isometry3::identity(), &cfg).unwrap();
+            assert_eq!(t.status(), TargetStatus::ReadyForFineLocalization);
+        }
+        t.apply_update(cube(0.05, 1.0), Isometry3::identity(), &cfg).unwrap();
+        assert_eq!(t.status(), TargetStatus::Converged);
+        assert_eq!(t.updates(), 7);
+        // Converged sticks.
+        t.apply_update(cube(1.0, 0.0), Isometry3::identity(), &cfg).unwrap();
+        assert_eq!(t.status(), TargetStatus::Converged);
+    }
+}

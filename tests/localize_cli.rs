@@ -1,0 +1,126 @@
+//! End-to-end test of `scarp localize` (issue 7, "Must show", small): one lawn-mower pass plus
+//! one fine-localization circle over target 1 of the default world, rendered by `scarp render`,
+//! then localized with ground-truth and with estimated poses.
+
+use std::path::Path;
+use std::process::Command;
+
+fn scarp(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_scarp"))
+        .args(args)
+        .output()
+        .expect("the scarp binary runs")
+}
+
+/// Runs `scarp` and fails the test, showing its stderr, unless it succeeds.
+fn scarp_ok(args: &[&str]) -> std::process::Output {
+    let out = scarp(args);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
+fn path_str(p: &Path) -> &str {
+    p.to_str().expect("a UTF-8 temporary path")
+}
+
+/// Renders the small must-show sequence: a 30 m lawn-mower square and a circle around target 1
+/// at 10 m search altitude.
+fn render(dir: &Path) {
+    scarp_ok(&[
+        "render",
+        "--path",
+        "lawnmower+finecircle",
+        "--target",
+        "1",
+        "--altitude",
+        "10",
+        "--frames",
+        "48",
+        "--seed",
+        "3",
+        "--out",
+        path_str(dir),
+    ]);
+}
+
+fn localize(seq: &Path, out: &Path, poses: &str) -> serde_json::Value {
+    let stdout = scarp_ok(&[
+        "localize",
+        path_str(seq),
+        "--poses",
+        poses,
+        "--out",
+        path_str(out),
+        "--json",
+    ])
+    .stdout;
+    let json: serde_json::Value = serde_json::from_slice(&stdout).expect("JSON on stdout");
+    // The same summary is written to the output directory.
+    let file: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("localization.json")).unwrap()).unwrap();
+    assert_eq!(json["targets"], file["targets"]);
+    json
+}
+
+/// The target matched to rock 1, with the issue's interface fields checked.
+fn rock_one(json: &serde_json::Value, out: &Path) -> serde_json::Value {
+    let targets = json["targets"].as_array().expect("a targets array");
+    for t in targets {
+        for key in ["id", "status", "center", "lambda_max", "entropy", "points"] {
+            assert!(!t[key].is_null(), "missing {key} in {t}");
+        }
+        assert_eq!(t["center"].as_array().unwrap().len(), 3);
+        let ply = out.join(t["points"].as_str().unwrap());
+        let cloud = scarp_export::ply::read_point_cloud(&ply).expect("points.ply reads back");
+        assert_eq!(cloud.positions.len(), 2000);
+        let id = t["id"].as_u64().unwrap();
+        assert!(out.join(format!("targets/{id}/target.json")).exists());
+    }
+    let matched: Vec<_> = targets
+        .iter()
+        .filter(|t| t["gt_rock_id"].as_u64() == Some(1))
+        .collect();
+    assert_eq!(matched.len(), 1, "one target on rock 1: {targets:?}");
+    matched[0].clone()
+}
+
+#[test]
+fn lawnmower_and_circle_localize_target_one() {
+    let dir = tempfile::tempdir().expect("a temporary directory");
+    let seq = dir.path().join("seq");
+    render(&seq);
+
+    let out_gt = dir.path().join("gt");
+    let json = localize(&seq, &out_gt, "groundtruth");
+    let t = rock_one(&json, &out_gt);
+    let error_m = t["centroid_error_m"].as_f64().unwrap();
+    assert!(error_m <= 0.3, "ground-truth poses: centroid error {error_m} m");
+    assert_eq!(t["status"], "converged", "{t}");
+    assert!(t["fraction_on_surface"].as_f64().unwrap() > 0.2, "{t}");
+    assert!(json["false_targets"].as_array().unwrap().is_empty(), "{json}");
+
+    let out_est = dir.path().join("est");
+    let json = localize(&seq, &out_est, "estimate");
+    let t = rock_one(&json, &out_est);
+    let error_m = t["centroid_error_m"].as_f64().unwrap();
+    assert!(error_m <= 1.0, "estimated poses: centroid error {error_m} m");
+    assert!(json["false_targets"].as_array().unwrap().is_empty(), "{json}");
+}
+
+#[test]
+fn missing_sequence_is_a_clear_error() {
+    let dir = tempfile::tempdir().expect("a temporary directory");
+    let out = scarp(&[
+        "localize",
+        path_str(&dir.path().join("nope")),
+        "--out",
+        path_str(&dir.path().join("out")),
+    ]);
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("nope"), "{stderr}");
+}
