@@ -14,3 +14,4 @@ pub mod evaluation;
 pub mod fragility;
 pub mod localization;
 pub mod mission;
+pub mod tracking;
