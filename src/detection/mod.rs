@@ -155,7 +155,9 @@ pub trait Detector {
 #[derive(Debug, thiserror::Error)]
 pub enum DetectionError {
     /// A box with a non-finite edge or no area.
-    #[error("invalid bounding box {bbox:?}: edges must be finite with x_min < x_max, y_min < y_max")]
+    #[error(
+        "invalid bounding box {bbox:?}: edges must be finite with x_min < x_max, y_min < y_max"
+    )]
     InvalidBox {
         /// The offending box.
         bbox: BoundingBox,
