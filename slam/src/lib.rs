@@ -41,6 +41,7 @@ pub mod frame;
 pub mod geometry;
 pub mod image;
 pub mod keyframes;
+pub mod mapping;
 pub mod mesh;
 pub mod meshing;
 pub mod odometry;

@@ -18,12 +18,18 @@ use std::time::Instant;
 
 use anyhow::Context;
 use clap::{Args, ValueEnum};
+use nalgebra::Isometry3;
 use scarp_datasets::sequence::Sequence;
+use scarp_datasets::sequence::SequenceEntry;
 use scarp_export::atomic::write_bytes_atomically;
 use scarp_export::glb::{GlbNode, GlbOptions, write_glb};
 use scarp_export::ply::{PlyEncoding, write_mesh};
+use scarp_export::tum::{StampedPose, write_tum_trajectory};
+use scarp_slam::mapping::{ModelTracker, ModelTrackingConfig};
 use scarp_slam::meshing::{MeshingConfig, extract_mesh};
 use scarp_slam::tsdf::{Roi, TsdfConfig, TsdfVolume};
+
+use crate::evaluation::trajectory::{TrajectoryEvalConfig, evaluate_trajectory};
 
 /// Which poses to fuse with.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -32,6 +38,9 @@ pub enum PoseSource {
     Groundtruth,
     /// `estimate.txt` (the state estimator's noisy poses).
     Estimate,
+    /// Frame-to-model RGBD odometry (each frame tracked against a raycast of the model being
+    /// built, initialised with the estimator's motion); writes `trajectory.txt`.
+    Odometry,
 }
 
 /// Fuse a sequence into a mesh: writes `mesh.ply`, `mesh.glb` and `map.json`.
@@ -85,13 +94,30 @@ pub fn run(args: MapArgs) -> anyhow::Result<()> {
     if let Some(m) = args.max_depth {
         config.max_depth_m = m;
     }
+    let (volume, integrate_ms, extra) = match args.poses {
+        PoseSource::Odometry => fuse_with_odometry(&args, &seq, config)?,
+        PoseSource::Groundtruth | PoseSource::Estimate => {
+            let (volume, integrate_ms) = fuse_with_given_poses(&args, &seq, config)?;
+            (volume, integrate_ms, serde_json::Map::new())
+        }
+    };
+    finish(&args, &seq, &volume, integrate_ms, extra)
+}
+
+/// Fuses every frame at its `groundtruth.txt` or `estimate.txt` pose; returns the volume and
+/// the integration time of each frame (ms).
+fn fuse_with_given_poses(
+    args: &MapArgs,
+    seq: &Sequence,
+    config: TsdfConfig,
+) -> anyhow::Result<(TsdfVolume, Vec<f64>)> {
     let mut volume = TsdfVolume::new(config)?;
     let bar = super::progress_bar(seq.len() as u64, "fusing");
     let mut integrate_ms = Vec::with_capacity(seq.len());
     for (i, entry) in seq.entries.iter().enumerate() {
         let pose = match args.poses {
             PoseSource::Groundtruth => entry.world_from_camera_truth,
-            PoseSource::Estimate => entry.world_from_camera_estimate,
+            PoseSource::Estimate | PoseSource::Odometry => entry.world_from_camera_estimate,
         }
         .with_context(|| {
             format!(
@@ -111,9 +137,132 @@ pub fn run(args: MapArgs) -> anyhow::Result<()> {
         bar.inc(1);
     }
     bar.finish_and_clear();
+    Ok((volume, integrate_ms))
+}
+
+/// Tracks every frame against the model and fuses it at the tracked pose; writes
+/// `trajectory.txt`. Returns the volume, the integration times (ms) and the `map.json` fields
+/// of the odometry.
+fn fuse_with_odometry(
+    args: &MapArgs,
+    seq: &Sequence,
+    config: TsdfConfig,
+) -> anyhow::Result<(
+    TsdfVolume,
+    Vec<f64>,
+    serde_json::Map<String, serde_json::Value>,
+)> {
+    let mut tracker = ModelTracker::new(
+        seq.camera,
+        ModelTrackingConfig {
+            tsdf: config,
+            ..ModelTrackingConfig::default()
+        },
+    )?;
+    let bar = super::progress_bar(seq.len() as u64, "tracking");
+    let mut integrate_ms = Vec::with_capacity(seq.len());
+    let mut odometry_ms = Vec::with_capacity(seq.len());
+    let mut failures = Vec::new();
+    let mut keyframes = Vec::new();
+    let mut poses = Vec::with_capacity(seq.len());
+    for (i, entry) in seq.entries.iter().enumerate() {
+        let estimate = entry
+            .world_from_camera_estimate
+            .or(entry.world_from_camera_truth)
+            .with_context(|| {
+                format!(
+                    "{}: frame {i} has neither an estimate nor a ground-truth pose",
+                    args.sequence.display()
+                )
+            })?;
+        let frame = seq
+            .load_frame(i)
+            .with_context(|| format!("{}: loading frame {i}", args.sequence.display()))?;
+        let tracked = tracker
+            .process(&frame, &estimate)
+            .with_context(|| format!("tracking frame {i}"))?;
+        integrate_ms.push(tracked.integrate_ms);
+        odometry_ms.extend(tracked.odometry_ms);
+        if tracked.fell_back
+            && let Some(failure) = tracked.odometry.as_ref().and_then(|o| o.failure.as_ref())
+        {
+            tracing::debug!(frame = i, %failure, "odometry failed; using the estimate's motion");
+            failures.push(serde_json::json!({ "frame": i, "reason": failure.to_string() }));
+        }
+        if tracked.keyframe.is_some() {
+            keyframes.push(i);
+        }
+        poses.push(StampedPose {
+            timestamp_s: entry.timestamp_s,
+            world_from_camera: tracked.world_from_camera,
+        });
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating {}", args.out.display()))?;
+    let trajectory = args.out.join("trajectory.txt");
+    write_tum_trajectory(
+        &trajectory,
+        &poses,
+        "scarp map --poses odometry: world_from_camera (frame-to-model)",
+    )
+    .with_context(|| format!("writing {}", trajectory.display()))?;
+    odometry_ms.sort_by(f64::total_cmp);
+    let mut extra = serde_json::Map::new();
+    extra.insert(
+        "odometry_ms_median".into(),
+        percentile(&odometry_ms, 0.5).into(),
+    );
+    extra.insert(
+        "odometry_ms_p90".into(),
+        percentile(&odometry_ms, 0.9).into(),
+    );
+    extra.insert("odometry_failures".into(), failures.len().into());
+    extra.insert("odometry_failure_frames".into(), failures.into());
+    extra.insert("keyframes".into(), keyframes.len().into());
+    let eval = TrajectoryEvalConfig::default();
+    if let Some(truth) = stamped(seq, |e| e.world_from_camera_truth) {
+        let ate = |est: &[StampedPose]| {
+            evaluate_trajectory(&truth, est, &eval)
+                .ok()
+                .map(|m| m.ate_rmse_m)
+        };
+        extra.insert("ate_rmse_m".into(), ate(&poses).into());
+        if let Some(estimate) = stamped(seq, |e| e.world_from_camera_estimate) {
+            extra.insert("estimate_ate_rmse_m".into(), ate(&estimate).into());
+        }
+    }
+    Ok((tracker.into_volume(), integrate_ms, extra))
+}
+
+/// Every frame's pose from `pick`, or `None` when a frame lacks one.
+fn stamped(
+    seq: &Sequence,
+    pick: impl Fn(&SequenceEntry) -> Option<Isometry3<f64>>,
+) -> Option<Vec<StampedPose>> {
+    seq.entries
+        .iter()
+        .map(|e| {
+            pick(e).map(|world_from_camera| StampedPose {
+                timestamp_s: e.timestamp_s,
+                world_from_camera,
+            })
+        })
+        .collect()
+}
+
+/// Meshes the volume, writes `mesh.ply`, `mesh.glb` and `map.json` (with `extra` fields).
+fn finish(
+    args: &MapArgs,
+    seq: &Sequence,
+    volume: &TsdfVolume,
+    mut integrate_ms: Vec<f64>,
+    extra: serde_json::Map<String, serde_json::Value>,
+) -> anyhow::Result<()> {
     let start = Instant::now();
     let mesh = extract_mesh(
-        &volume,
+        volume,
         &MeshingConfig {
             min_weight: args.min_weight,
             min_component_triangles: args.min_component_triangles,
@@ -134,7 +283,7 @@ pub fn run(args: MapArgs) -> anyhow::Result<()> {
     )?;
     let stats = volume.stats();
     integrate_ms.sort_by(f64::total_cmp);
-    let json = serde_json::json!({
+    let mut json = serde_json::json!({
         "frames": seq.len(),
         "poses": format!("{:?}", args.poses).to_lowercase(),
         // The f32 argument printed as the decimal the user typed (0.01, not 0.00999999977).
@@ -150,6 +299,9 @@ pub fn run(args: MapArgs) -> anyhow::Result<()> {
         "vertices": mesh.vertex_count(),
         "triangles": mesh.face_count(),
     });
+    if let Some(object) = json.as_object_mut() {
+        object.extend(extra);
+    }
     let text = serde_json::to_string_pretty(&json)?;
     write_bytes_atomically(args.out.join("map.json"), text.as_bytes())?;
     if args.json {

@@ -1,0 +1,57 @@
+//! The mapping pipeline that ties odometry, fusion, landmarks and bundle adjustment together:
+//!
+//! - [`tracker`]: frame-to-model RGBD tracking and TSDF fusion with the tracked poses
+//!   ([`ModelTracker`]).
+//! - [`landmarks`]: corners tracked with KLT across keyframes on and around the target,
+//!   initialised from depth ([`track_landmarks`]).
+//! - [`refine`]: landmarks → bundle adjustment → re-integration → mesh on a target's stored
+//!   keyframes ([`refine_keyframes`]), shared by `scarp map --ba` and the mission.
+//!
+//! World is ENU metres, cameras are OpenCV, transforms are `world_from_camera`.
+
+pub mod landmarks;
+pub mod refine;
+pub mod tracker;
+
+use thiserror::Error;
+
+use crate::SlamError;
+use crate::ba::BaError;
+use crate::features::FeatureError;
+use crate::odometry::OdometryError;
+use crate::tsdf::TsdfError;
+
+pub use landmarks::{LandmarkConfig, LandmarkView, Landmarks, track_landmarks};
+pub use refine::{KeyframeSet, RefineConfig, RefinedMap, fuse_and_mesh, refine_keyframes};
+pub use tracker::{ModelTracker, ModelTrackingConfig, TrackedFrame};
+
+/// An error of the mapping pipeline.
+#[derive(Debug, Error)]
+pub enum MappingError {
+    /// Invalid intrinsics or a non-finite pose.
+    #[error("camera or pose: {0}")]
+    Camera(SlamError),
+    /// The TSDF volume or raycaster rejected its input.
+    #[error(transparent)]
+    Tsdf(#[from] TsdfError),
+    /// The odometry rejected its input.
+    #[error(transparent)]
+    Odometry(#[from] OdometryError),
+    /// Corner detection or KLT rejected its input.
+    #[error("features: {0}")]
+    Features(#[from] FeatureError),
+    /// The bundle adjustment rejected the problem.
+    #[error("bundle adjustment: {0}")]
+    Ba(#[from] BaError),
+    /// A mapping setting is out of range.
+    #[error("invalid mapping setting `{field}`: {reason}")]
+    InvalidConfig {
+        /// The field.
+        field: &'static str,
+        /// Why it was rejected.
+        reason: &'static str,
+    },
+    /// Inconsistent inputs (list lengths, empty sets).
+    #[error("invalid mapping input: {0}")]
+    InvalidInput(String),
+}

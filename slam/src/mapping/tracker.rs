@@ -1,0 +1,334 @@
+//! Frame-to-model tracking: each new frame is tracked against a raycast of the TSDF being built
+//! (at the previous frame's pose), then fused at the pose found.
+//!
+//! The initial guess is the state estimator's relative motion since the previous frame. When the
+//! odometry flags its result as untrustworthy, the frame is placed with that relative motion
+//! instead (composed onto the previous tracked pose) and still fused.
+//!
+//! The tracker also accumulates the covariance of the motion since the last keyframe (the
+//! inverse odometry information of each frame, moved to the keyframe pair's frame with the SE(3)
+//! adjoint; a fixed fallback covariance for frames that failed), which becomes the odometry
+//! relative-pose prior of the bundle adjustment.
+
+use std::time::Instant;
+
+use nalgebra::{Isometry3, Matrix3, Matrix6, UnitQuaternion, Vector6};
+use serde::{Deserialize, Serialize};
+
+use super::MappingError;
+use crate::geometry::check_finite_isometry;
+use crate::image::gray_from_rgb;
+use crate::keyframes::{KeyframeConfig, KeyframeReason, KeyframeSelector};
+use crate::odometry::{
+    OdometryConfig, OdometryResult, RaycastImages, SourceFrame, TrackingReference, frame_pyramid,
+    track,
+};
+use crate::tsdf::raycast::{RaycastConfig, raycast};
+use crate::tsdf::{TsdfConfig, TsdfVolume};
+use crate::{PinholeCamera, RgbdFrame};
+
+/// Settings of [`ModelTracker`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ModelTrackingConfig {
+    /// The volume frames are fused into (voxel size, truncation, depth range, ROI). Default
+    /// [`TsdfConfig::default`] (1 cm voxels, no ROI).
+    pub tsdf: TsdfConfig,
+    /// The odometry. Default [`OdometryConfig::default`].
+    pub odometry: OdometryConfig,
+    /// The raycast that renders the model as the tracking reference. Default
+    /// [`RaycastConfig::default`].
+    pub raycast: RaycastConfig,
+    /// Keyframe thresholds, applied to the tracked poses. Default [`KeyframeConfig::default`].
+    pub keyframes: KeyframeConfig,
+    /// σ per axis of a frame's motion when the odometry failed and the estimator's motion was
+    /// used, metres. Default 0.05 (the simulated estimator's white position noise is 2–3 cm per
+    /// sample, so its frame-to-frame motion is off by about 4 cm).
+    pub fallback_sigma_m: f64,
+    /// The same for rotation, degrees. Default 0.5.
+    pub fallback_sigma_deg: f64,
+}
+
+impl Default for ModelTrackingConfig {
+    fn default() -> Self {
+        Self {
+            tsdf: TsdfConfig::default(),
+            odometry: OdometryConfig::default(),
+            raycast: RaycastConfig::default(),
+            keyframes: KeyframeConfig::default(),
+            fallback_sigma_m: 0.05,
+            fallback_sigma_deg: 0.5,
+        }
+    }
+}
+
+/// What [`ModelTracker::process`] did with one frame.
+#[derive(Debug, Clone)]
+pub struct TrackedFrame {
+    /// Index of the frame (0 for the first processed).
+    pub index: usize,
+    /// The pose the frame was fused at: the tracked pose, the estimator's relative motion after a
+    /// failure, or the state estimate itself for the first frame.
+    pub world_from_camera: Isometry3<f64>,
+    /// The odometry's result (`None` for the first frame, which has no model to track against).
+    /// Its `reference_from_current` is relative to the previous frame's fused pose.
+    pub odometry: Option<OdometryResult>,
+    /// The odometry failed and the estimator's motion was used.
+    pub fell_back: bool,
+    /// Why the frame became a keyframe, or `None`.
+    pub keyframe: Option<KeyframeReason>,
+    /// For a keyframe after the first: the covariance of the tracked motion since the previous
+    /// keyframe, as a right perturbation (translation m, rotation rad) of
+    /// `previous_keyframe_from_camera`.
+    pub keyframe_covariance: Option<Matrix6<f64>>,
+    /// Wall time of the odometry (raycast, reference, source pyramid, Gauss–Newton),
+    /// milliseconds; `None` for the first frame.
+    pub odometry_ms: Option<f64>,
+    /// Wall time of the TSDF integration, milliseconds.
+    pub integrate_ms: f64,
+}
+
+/// Frame-to-model RGBD tracking and TSDF fusion with its own poses.
+///
+/// ```no_run
+/// # use scarp_slam::mapping::{ModelTracker, ModelTrackingConfig};
+/// # fn frames() -> Vec<(scarp_slam::RgbdFrame, nalgebra::Isometry3<f64>)> { Vec::new() }
+/// let camera = scarp_slam::PinholeCamera::from_hfov(640, 480, 80.0).unwrap();
+/// let mut tracker = ModelTracker::new(camera, ModelTrackingConfig::default()).unwrap();
+/// for (frame, world_from_camera_estimate) in frames() {
+///     let tracked = tracker.process(&frame, &world_from_camera_estimate).unwrap();
+///     println!("{:?}", tracked.world_from_camera);
+/// }
+/// ```
+#[derive(Debug)]
+pub struct ModelTracker {
+    camera: PinholeCamera,
+    config: ModelTrackingConfig,
+    volume: TsdfVolume,
+    selector: KeyframeSelector,
+    /// The previous frame's fused pose and its state estimate.
+    previous: Option<(Isometry3<f64>, Isometry3<f64>)>,
+    /// Covariance of the motion since the last keyframe (right perturbation).
+    covariance_since_keyframe: Matrix6<f64>,
+    frames: usize,
+}
+
+impl ModelTracker {
+    /// An empty model seen by `camera`.
+    ///
+    /// # Errors
+    /// [`MappingError::Tsdf`] / [`MappingError::Odometry`] for invalid settings,
+    /// [`MappingError::Camera`] for invalid intrinsics.
+    pub fn new(camera: PinholeCamera, config: ModelTrackingConfig) -> Result<Self, MappingError> {
+        camera.validate().map_err(MappingError::Camera)?;
+        config.odometry.validate()?;
+        for (field, value) in [
+            ("fallback_sigma_m", config.fallback_sigma_m),
+            ("fallback_sigma_deg", config.fallback_sigma_deg),
+        ] {
+            if !(value.is_finite() && value > 0.0) {
+                return Err(MappingError::InvalidConfig {
+                    field,
+                    reason: "must be positive and finite",
+                });
+            }
+        }
+        let volume = TsdfVolume::new(config.tsdf.clone())?;
+        Ok(Self {
+            camera,
+            selector: KeyframeSelector::new(config.keyframes, camera),
+            config,
+            volume,
+            previous: None,
+            covariance_since_keyframe: Matrix6::zeros(),
+            frames: 0,
+        })
+    }
+
+    /// The model built so far.
+    pub fn volume(&self) -> &TsdfVolume {
+        &self.volume
+    }
+
+    /// The model, consuming the tracker.
+    pub fn into_volume(self) -> TsdfVolume {
+        self.volume
+    }
+
+    /// Tracks `frame` against the model (initialised with the estimator's motion since the
+    /// previous frame), fuses it at the pose found, and offers it as a keyframe.
+    ///
+    /// # Errors
+    /// [`MappingError::Camera`] for a non-finite estimate; [`MappingError::Tsdf`] when the frame
+    /// does not match the camera; [`MappingError::Odometry`] for mismatched inputs. A frame the
+    /// odometry cannot track is not an error (see [`TrackedFrame::fell_back`]).
+    pub fn process(
+        &mut self,
+        frame: &RgbdFrame,
+        world_from_camera_estimate: &Isometry3<f64>,
+    ) -> Result<TrackedFrame, MappingError> {
+        check_finite_isometry(world_from_camera_estimate, "world_from_camera_estimate")
+            .map_err(MappingError::Camera)?;
+        let index = self.frames;
+        let (world_from_camera, odometry, fell_back, odometry_ms) = match self.previous {
+            None => (*world_from_camera_estimate, None, false, None),
+            Some((world_from_previous, previous_estimate)) => {
+                let started = Instant::now();
+                let guess = previous_estimate.inverse() * world_from_camera_estimate;
+                let result = self.track_against_model(frame, &world_from_previous, &guess)?;
+                let ms = started.elapsed().as_secs_f64() * 1e3;
+                let (relative, fell_back) = if result.is_ok() {
+                    (result.reference_from_current, false)
+                } else {
+                    (guess, true)
+                };
+                let covariance = if fell_back {
+                    None
+                } else {
+                    result.information.try_inverse()
+                }
+                .filter(|c| c.iter().all(|v| v.is_finite()))
+                .unwrap_or_else(|| self.fallback_covariance());
+                self.covariance_since_keyframe =
+                    chain_covariance(&self.covariance_since_keyframe, &covariance, &relative);
+                (
+                    renormalized(&(world_from_previous * relative)),
+                    Some(result),
+                    fell_back,
+                    Some(ms),
+                )
+            }
+        };
+        let started = Instant::now();
+        self.volume
+            .integrate(frame, &self.camera, &world_from_camera)?;
+        let integrate_ms = started.elapsed().as_secs_f64() * 1e3;
+        let keyframe = self.selector.offer(&world_from_camera, &frame.depth_m);
+        let keyframe_covariance = match keyframe {
+            Some(_) if index > 0 => Some(self.covariance_since_keyframe),
+            _ => None,
+        };
+        if keyframe.is_some() {
+            self.covariance_since_keyframe = Matrix6::zeros();
+        }
+        self.previous = Some((world_from_camera, *world_from_camera_estimate));
+        self.frames += 1;
+        Ok(TrackedFrame {
+            index,
+            world_from_camera,
+            odometry,
+            fell_back,
+            keyframe,
+            keyframe_covariance,
+            odometry_ms,
+            integrate_ms,
+        })
+    }
+
+    /// The covariance of a frame whose odometry failed.
+    fn fallback_covariance(&self) -> Matrix6<f64> {
+        let t = self.config.fallback_sigma_m.powi(2);
+        let r = self.config.fallback_sigma_deg.to_radians().powi(2);
+        Matrix6::from_diagonal(&Vector6::new(t, t, t, r, r, r))
+    }
+
+    /// Raycasts the model at `world_from_reference` and tracks `frame` against it.
+    fn track_against_model(
+        &self,
+        frame: &RgbdFrame,
+        world_from_reference: &Isometry3<f64>,
+        guess: &Isometry3<f64>,
+    ) -> Result<OdometryResult, MappingError> {
+        let odometry = &self.config.odometry;
+        let model = raycast(
+            &self.volume,
+            &self.camera,
+            world_from_reference,
+            &self.config.raycast,
+        )?;
+        let reference = TrackingReference::from_raycast(
+            &self.camera,
+            &RaycastImages {
+                intensity: gray_from_rgb(&model.rgb),
+                depth_m: model.depth_m,
+                normals: model.normals_camera,
+            },
+            odometry,
+        )?;
+        let source = SourceFrame::from_pyramid(
+            &self.camera,
+            &frame_pyramid(frame, odometry.levels),
+            odometry,
+        )?;
+        Ok(track(&reference, &source, guess, odometry)?)
+    }
+}
+
+/// The transform with its quaternion renormalised (chained products drift off unit length).
+pub(crate) fn renormalized(t: &Isometry3<f64>) -> Isometry3<f64> {
+    Isometry3::from_parts(
+        t.translation,
+        UnitQuaternion::new_normalize(*t.rotation.quaternion()),
+    )
+}
+
+/// The SE(3) adjoint of `t` for perturbations ordered (translation, rotation):
+/// `t·exp(δ) = exp(Ad·δ)·t`, Ad = [[R, [t]ₓR], [0, R]].
+pub(crate) fn adjoint(t: &Isometry3<f64>) -> Matrix6<f64> {
+    let r = *t.rotation.to_rotation_matrix().matrix();
+    let p = t.translation.vector;
+    let skew = Matrix3::new(0.0, -p.z, p.y, p.z, 0.0, -p.x, -p.y, p.x, 0.0);
+    let mut ad = Matrix6::zeros();
+    ad.fixed_view_mut::<3, 3>(0, 0).copy_from(&r);
+    ad.fixed_view_mut::<3, 3>(0, 3).copy_from(&(skew * r));
+    ad.fixed_view_mut::<3, 3>(3, 3).copy_from(&r);
+    ad
+}
+
+/// Covariance of the right perturbation of `keyframe_from_previous · previous_from_current`
+/// given `so_far` (right perturbation of `keyframe_from_previous`) and `frame_left`, the
+/// covariance of the left perturbation of `previous_from_current` (as the odometry's
+/// information describes it): both move through Ad(previous_from_current⁻¹).
+pub(crate) fn chain_covariance(
+    so_far: &Matrix6<f64>,
+    frame_left: &Matrix6<f64>,
+    previous_from_current: &Isometry3<f64>,
+) -> Matrix6<f64> {
+    let a = adjoint(&previous_from_current.inverse());
+    let c = a * (so_far + frame_left) * a.transpose();
+    (c + c.transpose()) * 0.5
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{Translation3, Vector3};
+
+    #[test]
+    fn adjoint_moves_a_right_perturbation_to_the_left() {
+        let t = Isometry3::from_parts(
+            Translation3::new(0.3, -1.2, 2.0),
+            UnitQuaternion::from_scaled_axis(Vector3::new(0.2, -0.4, 0.9)),
+        );
+        let delta = Vector6::new(1e-6, -2e-6, 3e-6, 2e-6, 1e-6, -3e-6);
+        let exp = |d: &Vector6<f64>| {
+            Isometry3::from_parts(
+                Translation3::new(d[0], d[1], d[2]),
+                UnitQuaternion::from_scaled_axis(Vector3::new(d[3], d[4], d[5])),
+            )
+        };
+        let left = exp(&(adjoint(&t) * delta)) * t;
+        let right = t * exp(&delta);
+        let e = left.inverse() * right;
+        assert!(e.translation.vector.norm() < 1e-10, "{e:?}");
+        assert!(e.rotation.angle() < 1e-10);
+    }
+
+    #[test]
+    fn chained_identity_motions_add_covariances() {
+        let a = Matrix6::identity() * 2.0;
+        let b = Matrix6::identity() * 3.0;
+        let c = chain_covariance(&a, &b, &Isometry3::identity());
+        assert!((c - Matrix6::identity() * 5.0).amax() < 1e-12);
+    }
+}
