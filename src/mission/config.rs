@@ -35,6 +35,10 @@ pub struct MissionConfig {
     pub planning: scarp_planning::PlanningConfig,
     /// Depth and colour noise of the simulated camera.
     pub sensor: scarp_datasets::sensor::SensorConfig,
+    /// Box tracking (Algorithm 1).
+    pub tracker: crate::tracking::tracker::TrackerConfig,
+    /// Depth-filter localization (Algorithms 2–3).
+    pub localization: crate::localization::config::LocalizationConfig,
     /// GPS/IMU state-estimator error.
     pub estimator: scarp_datasets::estimator::EstimatorConfig,
     /// Fragility analysis of each mapped rock.
@@ -56,6 +60,8 @@ impl Default for MissionConfig {
             mapping: MappingConfig::default(),
             planning: scarp_planning::PlanningConfig::default(),
             sensor: scarp_datasets::sensor::SensorConfig::default(),
+            tracker: crate::tracking::tracker::TrackerConfig::default(),
+            localization: crate::localization::config::LocalizationConfig::default(),
             estimator: scarp_datasets::estimator::EstimatorConfig::default(),
             fragility: crate::fragility::FragilityConfig::default(),
         }
@@ -180,9 +186,9 @@ pub struct MappingConfig {
     pub roi_margin_m: f64,
     /// Drop mesh components smaller than this many triangles. Default 500.
     pub min_component_triangles: usize,
-    /// Besides keyframes, every n-th mapped frame is kept for re-integration after bundle
-    /// adjustment. Default 4 (5 Hz of the 20 Hz camera).
-    pub store_every: usize,
+    /// Landmarks, bundle adjustment, re-integration and meshing of the keyframes (its TSDF
+    /// settings are replaced by the mapping volume's).
+    pub refine: scarp_slam::mapping::RefineConfig,
     /// RGBD odometry.
     pub odometry: scarp_slam::odometry::OdometryConfig,
     /// Keyframe selection for bundle adjustment.
@@ -196,7 +202,7 @@ impl Default for MappingConfig {
             max_depth_m: 5.0,
             roi_margin_m: 0.4,
             min_component_triangles: 500,
-            store_every: 4,
+            refine: scarp_slam::mapping::RefineConfig::default(),
             odometry: scarp_slam::odometry::OdometryConfig::default(),
             keyframes: scarp_slam::keyframes::KeyframeConfig::default(),
         }

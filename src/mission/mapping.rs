@@ -2,10 +2,9 @@
 //! cylinder region of interest (plus a margin), the coverage test that ends it, then bundle
 //! adjustment, re-integration, the mesh, fragility and export.
 //!
-//! Frames whose view misses the region of interest are not mapped at all. Keyframes and every
-//! `store_every`-th frame are kept (without their instance masks) for bundle adjustment and
-//! re-integration; the rest are dropped after fusion, so memory stays bounded by the mapping
-//! flight's length, not the camera rate.
+//! Frames whose view misses the region of interest are not mapped at all. Only keyframes are
+//! kept (without their instance masks) for bundle adjustment and re-integration; the rest are
+//! dropped after fusion, so memory grows with the distance flown, not with the camera rate.
 
 use std::path::Path;
 use std::time::Instant;
@@ -18,10 +17,10 @@ use scarp_export::glb::{GlbNode, GlbOptions, write_glb};
 use scarp_export::ply::{PlyEncoding, write_mesh, write_point_cloud};
 use scarp_export::tum::StampedPose;
 use scarp_planning::prelude::VerticalCylinder;
-use scarp_slam::mapping::{ModelTracker, ModelTrackingConfig};
-use scarp_slam::meshing::{MeshingConfig, extract_mesh};
-use scarp_slam::tsdf::roi::Roi;
-use scarp_slam::tsdf::{TsdfConfig, TsdfVolume};
+use scarp_slam::mapping::{KeyframeSet, ModelTracker, ModelTrackingConfig, RefineConfig, refine_keyframes};
+use scarp_slam::meshing::MeshingConfig;
+use scarp_slam::tsdf::Roi;
+use scarp_slam::tsdf::TsdfConfig;
 use scarp_slam::{PinholeCamera, PointCloud, RgbdFrame, TriangleMesh};
 
 use super::config::MissionConfig;
@@ -43,22 +42,21 @@ pub struct StoredFrame {
     pub world_from_camera_estimate: Isometry3<f64>,
     /// The true pose (ground truth, for evaluation only).
     pub world_from_camera_truth: Isometry3<f64>,
-    /// Whether the keyframe selector chose it.
-    pub keyframe: bool,
+    /// Covariance of the odometry motion since the previous keyframe (see
+    /// [`scarp_slam::mapping::KeyframeSet::odometry_covariance`]).
+    pub odometry_covariance: Option<nalgebra::Matrix6<f64>>,
 }
 
 /// The state of mapping one target.
 pub struct MappingSession {
     target_id: u32,
     cylinder: VerticalCylinder,
-    roi: Roi,
     camera: PinholeCamera,
     tracker: ModelTracker,
     coverage: CylinderCoverage,
     stored: Vec<StoredFrame>,
     frames_mapped: usize,
     odometry_failures: usize,
-    store_every: usize,
 }
 
 /// The region of interest: the cylinder grown by `margin_m` on every side.
@@ -113,7 +111,7 @@ impl MappingSession {
         let tsdf = TsdfConfig {
             voxel_size_m: m.voxel_size_m as f32,
             max_depth_m: m.max_depth_m as f32,
-            roi: Some(roi.clone()),
+            roi: Some(roi),
             ..TsdfConfig::default()
         };
         let tracking = ModelTrackingConfig {
@@ -125,14 +123,12 @@ impl MappingSession {
         Ok(Self {
             target_id,
             cylinder: *cylinder,
-            roi,
             camera: *camera,
             tracker: ModelTracker::new(*camera, tracking)?,
             coverage: CylinderCoverage::new(cylinder, config.coverage),
             stored: Vec::new(),
             frames_mapped: 0,
             odometry_failures: 0,
-            store_every: m.store_every.max(1),
         })
     }
 
@@ -147,7 +143,7 @@ impl MappingSession {
     }
 
     /// Maps one frame when its view meets the region of interest: tracks it against the model,
-    /// fuses it, updates the coverage and keeps it if it is a keyframe or due for storage.
+    /// fuses it, updates the coverage and keeps it if it is a keyframe.
     ///
     /// # Errors
     /// A frame that does not match the camera or a non-finite estimate.
@@ -167,14 +163,13 @@ impl MappingSession {
             self.odometry_failures += 1;
         }
         self.coverage.observe(&self.camera, &tracked.world_from_camera);
-        let keyframe = tracked.keyframe.is_some();
-        if keyframe || self.frames_mapped % self.store_every == 0 {
+        if tracked.keyframe.is_some() {
             self.stored.push(StoredFrame {
                 frame,
                 world_from_camera_odometry: tracked.world_from_camera,
                 world_from_camera_estimate: *world_from_camera_estimate,
                 world_from_camera_truth: *world_from_camera_truth,
-                keyframe,
+                odometry_covariance: tracked.keyframe_covariance,
             });
         }
         self.frames_mapped += 1;
@@ -242,23 +237,34 @@ pub fn finish_target(
     report.frames_mapped = session.frames_mapped;
     report.coverage = session.coverage.fraction();
     report.base_coverage = session.coverage.bottom_fraction();
-    report.keyframes = session.stored.iter().filter(|f| f.keyframe).count();
+    report.keyframes = session.stored.len();
     let complete = session.coverage.is_complete();
     let frames = session.stored;
     if frames.len() < 3 {
         report.error = Some(format!("only {} frames were mapped", frames.len()));
         return Ok(false);
     }
-    let odometry_poses: Vec<Isometry3<f64>> = frames.iter().map(|f| f.world_from_camera_odometry).collect();
-    let refined = super::bundle::refine(&frames, &session.camera, &session.roi, config)?;
-    let mut volume = TsdfVolume::new(session.tracker.volume().config().clone())?;
-    let rgbd: Vec<RgbdFrame> = frames.iter().map(|f| f.frame.clone()).collect();
-    volume.reintegrate(&rgbd, &session.camera, &refined)?;
-    let meshing = MeshingConfig {
-        min_component_triangles: config.mapping.min_component_triangles,
-        ..MeshingConfig::default()
+    let odometry_poses: Vec<Isometry3<f64>> = frames
+        .iter()
+        .map(|f| f.world_from_camera_odometry)
+        .collect();
+    let keyframes = KeyframeSet {
+        frames: frames.iter().map(|f| f.frame.clone()).collect(),
+        world_from_camera_odometry: odometry_poses.clone(),
+        world_from_camera_estimate: frames.iter().map(|f| f.world_from_camera_estimate).collect(),
+        odometry_covariance: frames.iter().map(|f| f.odometry_covariance).collect(),
     };
-    let mesh = extract_mesh(&volume, &meshing);
+    let refine = RefineConfig {
+        tsdf: session.tracker.volume().config().clone(),
+        meshing: MeshingConfig {
+            min_component_triangles: config.mapping.min_component_triangles,
+            ..config.mapping.refine.meshing
+        },
+        ..config.mapping.refine.clone()
+    };
+    let refined = refine_keyframes(&session.camera, &keyframes, &refine)?;
+    let mesh = refined.mesh;
+    let refined = refined.world_from_camera;
     report.triangles = mesh.faces.len();
     timings.ba_mesh_s += clock.elapsed().as_secs_f64();
 

@@ -5,6 +5,9 @@
 //!   on the quadrotor model) that every mode uses.
 //! - [`mode`]: the modes and the flight log.
 //! - [`catalog`]: the mission's targets and their status.
+//! - [`simulation`]: the simulation loop and the state machine.
+//! - [`perception`]: detect → track → localize during Search and FineLocalize.
+//! - [`mapping`]: Map mode for one target, then bundle adjustment, mesh, fragility, export.
 //! - [`coverage`]: the cylinder-coverage test that ends mapping.
 //! - [`evaluation`]: matching targets to the ground truth.
 //! - [`report`]: `mission.json`, `targets.geojson`, `targets.csv`.
@@ -14,6 +17,9 @@ pub mod config;
 pub mod coverage;
 pub mod evaluation;
 pub mod html;
+pub mod mapping;
 pub mod mode;
 pub mod motion;
+pub mod perception;
 pub mod report;
+pub mod simulation;
