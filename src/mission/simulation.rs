@@ -177,6 +177,13 @@ impl<'a> Mission<'a> {
     }
 
     fn set_mode(&mut self, mode: Mode) {
+        tracing::info!(
+            "t = {:.1} s: {} → {}{}",
+            self.motion.time_s(),
+            self.mode.as_str(),
+            mode.as_str(),
+            mode.target().map_or(String::new(), |id| format!(" (target {id})"))
+        );
         self.mode = mode;
         self.report.modes.push(ModeChange {
             time_s: self.motion.time_s(),
@@ -343,6 +350,13 @@ impl<'a> Mission<'a> {
             if is_already_handled(&self.targets, &state.center, 1.0) {
                 continue;
             }
+            tracing::info!(
+                "t = {t:.1} s: target {} registered at ({:.1}, {:.1}, {:.1})",
+                state.id,
+                state.center.x,
+                state.center.y,
+                state.center.z
+            );
             self.targets
                 .insert(state.id, MissionTarget::new(state.id, &state.center, t));
         }
@@ -533,6 +547,14 @@ impl<'a> Mission<'a> {
                 TargetStatus::Incomplete
             }
         };
+        tracing::info!(
+            "t = {:.1} s: target {id} {} (coverage {:.2}, {} keyframes, α_min {:?}°)",
+            self.motion.time_s(),
+            status.as_str(),
+            target.report.coverage,
+            target.report.keyframes,
+            target.report.alpha_min_deg
+        );
         self.set_status(id, status);
         Ok(())
     }
