@@ -18,7 +18,7 @@ use std::time::Instant;
 
 use anyhow::Context;
 use clap::{Args, ValueEnum};
-use nalgebra::Isometry3;
+use nalgebra::{Isometry3, UnitQuaternion};
 use scarp_datasets::sequence::Sequence;
 use scarp_datasets::sequence::SequenceEntry;
 use scarp_export::atomic::write_bytes_atomically;
@@ -35,7 +35,7 @@ use scarp_slam::meshing::{MeshingConfig, extract_mesh};
 use scarp_slam::tsdf::{Roi, TsdfConfig, TsdfVolume};
 
 use crate::evaluation::mesh::{MeshEvalConfig, evaluate_mesh};
-use crate::evaluation::trajectory::{TrajectoryEvalConfig, evaluate_trajectory};
+use crate::evaluation::trajectory::{TrajectoryEvalConfig, evaluate_trajectory, umeyama};
 
 /// Which poses to fuse with.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -214,9 +214,9 @@ fn refine(
     extra.insert("ba_ms".into(), refined.ba_ms.into());
     extra.insert("reintegrate_ms".into(), refined.reintegrate_ms.into());
     let truth: Option<Vec<Isometry3<f64>>> = keyframes.truth.iter().copied().collect();
-    if let Some(truth) = truth {
+    if let Some(truth) = &truth {
         let eval = TrajectoryEvalConfig::default();
-        let gt = stamped(&truth);
+        let gt = stamped(truth);
         let ate = |poses: &[Isometry3<f64>]| {
             evaluate_trajectory(&gt, &stamped(poses), &eval)
                 .ok()
@@ -244,15 +244,35 @@ fn refine(
             crop_to_gt_m: Some(0.1),
             ..MeshEvalConfig::default()
         };
-        let score = |mesh: &TriangleMesh| {
-            evaluate_mesh(mesh, &rock.mesh, &eval, None)
+        // The maps live in the odometry's frame (anchored at the first state estimate, which
+        // is decimetres off): each mesh is first moved by the SE(3) alignment of its keyframe
+        // positions onto the ground truth (the ATE's alignment), so the F-score measures the
+        // shape, not the GPS error.
+        let score = |mesh: &TriangleMesh, poses: &[Isometry3<f64>]| {
+            let mut aligned = mesh.clone();
+            if let Some(truth) = truth.as_ref() {
+                let source: Vec<_> = poses.iter().map(|p| p.translation.vector).collect();
+                let target: Vec<_> = truth.iter().map(|p| p.translation.vector).collect();
+                let s = umeyama(&source, &target, false).ok()?;
+                aligned.transform(&Isometry3::from_parts(
+                    s.translation.into(),
+                    UnitQuaternion::from_rotation_matrix(&s.rotation),
+                ));
+            }
+            evaluate_mesh(&aligned, &rock.mesh, &eval, None)
                 .map(|e| e.fscore)
                 .ok()
         };
         if let Some(before) = &refined.mesh_before {
-            extra.insert("fscore_before_ba".into(), score(before).into());
+            extra.insert(
+                "fscore_before_ba".into(),
+                score(before, &keyframes.set.world_from_camera_odometry).into(),
+            );
         }
-        extra.insert("fscore_after_ba".into(), score(&refined.mesh).into());
+        extra.insert(
+            "fscore_after_ba".into(),
+            score(&refined.mesh, &refined.world_from_camera).into(),
+        );
         extra.insert("fscore_tau_m".into(), args.tau.into());
         extra.insert("fscore_rock_id".into(), rock.id.into());
     }
