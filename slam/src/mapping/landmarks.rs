@@ -43,6 +43,11 @@ pub struct LandmarkConfig {
     /// Corners whose back-projected point lies outside the ROI grown by this are ignored,
     /// metres. Default 0.3 ("on and around the target").
     pub roi_margin_m: f64,
+    /// Follow the tracks alive at the last keyframe into the first one and merge them with the
+    /// tracks started there (an orbit that closes its loop). Default true.
+    pub close_loop: bool,
+    /// Loop merging joins tracks that land within this distance, pixels. Default 1.5.
+    pub loop_merge_px: f64,
     /// A depth is used (for initialisation and as a depth residual) only where the four pixels
     /// around the corner agree within this fraction of their mean. Default 0.02.
     pub max_depth_spread_ratio: f64,
@@ -61,6 +66,8 @@ impl Default for LandmarkConfig {
             min_observations: 3,
             max_prediction_error_px: 4.0,
             roi_margin_m: 0.3,
+            close_loop: true,
+            loop_merge_px: 1.5,
             max_depth_spread_ratio: 0.02,
         }
     }
@@ -139,6 +146,12 @@ pub fn track_landmarks(
         live.extend(started);
         previous = Some(pyramid);
     }
+    if config.close_loop
+        && views.len() > 2
+        && let Some(last) = &previous
+    {
+        close_loop(camera, views, last, &mut live, &mut finished, config)?;
+    }
     finished.append(&mut live);
     let mut landmarks = Landmarks::default();
     for track in finished {
@@ -157,6 +170,53 @@ pub fn track_landmarks(
         }
     }
     Ok(landmarks)
+}
+
+/// Follows the live tracks from the last keyframe into the first; a track that lands within
+/// `loop_merge_px` of a track started in the first keyframe takes over that track's
+/// observations (one landmark seen at both ends of the loop).
+fn close_loop(
+    camera: &PinholeCamera,
+    views: &[LandmarkView<'_>],
+    last: &KltPyramid,
+    live: &mut [Track],
+    finished: &mut [Track],
+    config: &LandmarkConfig,
+) -> Result<(), MappingError> {
+    let first = KltPyramid::new(views[0].gray, config.klt.pyramid_levels);
+    let points: Vec<Point2<f32>> = live.iter().map(|t| t.position).collect();
+    let tracked = track_points(last, &first, &points, &config.klt)?;
+    let camera_from_world = views[0].world_from_camera.inverse();
+    let merge_d2 = (config.loop_merge_px * config.loop_merge_px) as f32;
+    for (track, result) in live.iter_mut().zip(tracked) {
+        if result.status != KltStatus::Tracked
+            || track.observations.iter().any(|o| o.0 == 0)
+        {
+            continue;
+        }
+        let pixel = Vector2::new(f64::from(result.position.x), f64::from(result.position.y));
+        let predicted = camera.project(&(camera_from_world * Point3::from(track.point_world)));
+        if !predicted.is_some_and(|p| (p.coords - pixel).norm() <= config.max_prediction_error_px)
+        {
+            continue;
+        }
+        // The nearest unmerged track started in keyframe 0.
+        let nearest = finished
+            .iter_mut()
+            .filter(|t| t.observations.first().is_some_and(|o| o.0 == 0))
+            .map(|t| {
+                let p = t.observations[0].1;
+                let d2 = (p.x as f32 - result.position.x).powi(2)
+                    + (p.y as f32 - result.position.y).powi(2);
+                (d2, t)
+            })
+            .filter(|(d2, _)| *d2 <= merge_d2)
+            .min_by(|a, b| a.0.total_cmp(&b.0));
+        if let Some((_, start)) = nearest {
+            track.observations.append(&mut start.observations);
+        }
+    }
+    Ok(())
 }
 
 /// Detects corners in keyframe `k` and starts a track for each usable one (the corner detector's
@@ -216,6 +276,7 @@ fn validate(config: &LandmarkConfig) -> Result<(), MappingError> {
         ("min_track_distance_px", config.min_track_distance_px),
         ("max_prediction_error_px", config.max_prediction_error_px),
         ("roi_margin_m", config.roi_margin_m),
+        ("loop_merge_px", config.loop_merge_px),
         ("max_depth_spread_ratio", config.max_depth_spread_ratio),
     ] {
         if !(value.is_finite() && value >= 0.0) {

@@ -23,7 +23,7 @@ use crate::tsdf::TsdfError;
 
 pub use landmarks::{LandmarkConfig, LandmarkView, Landmarks, track_landmarks};
 pub use refine::{KeyframeSet, RefineConfig, RefinedMap, fuse_and_mesh, refine_keyframes};
-pub use tracker::{ModelTracker, ModelTrackingConfig, TrackedFrame};
+pub use tracker::{ModelTracker, ModelTrackingConfig, TrackedFrame, TrackingReferenceKind};
 
 /// An error of the mapping pipeline.
 #[derive(Debug, Error)]

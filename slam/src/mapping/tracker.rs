@@ -20,21 +20,39 @@ use crate::geometry::check_finite_isometry;
 use crate::image::gray_from_rgb;
 use crate::keyframes::{KeyframeConfig, KeyframeReason, KeyframeSelector};
 use crate::odometry::{
-    OdometryConfig, OdometryResult, RaycastImages, SourceFrame, TrackingReference, frame_pyramid,
-    track,
+    OdometryConfig, RaycastImages, SourceFrame, TrackingReference, frame_pyramid, track,
 };
+use crate::odometry::OdometryResult;
 use crate::tsdf::raycast::{RaycastConfig, raycast};
 use crate::tsdf::{TsdfConfig, TsdfVolume};
 use crate::{PinholeCamera, RgbdFrame};
+
+/// What each frame is tracked against.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TrackingReferenceKind {
+    /// A raycast of the TSDF being built, at the previous frame's pose (KinectFusion's
+    /// frame-to-model tracking).
+    Model,
+    /// The last keyframe's own images (frame-to-keyframe tracking).
+    Keyframe,
+}
 
 /// Settings of [`ModelTracker`].
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct ModelTrackingConfig {
+    /// What frames are tracked against. Default [`TrackingReferenceKind::Keyframe`]: on the
+    /// default orbit with the default sensor noise, tracking against a raycast of the model
+    /// diverges by decimetres (the noisy far terrain and the ROI cut in the model pull it away),
+    /// while keyframe tracking stays within millimetres.
+    pub reference: TrackingReferenceKind,
     /// The volume frames are fused into (voxel size, truncation, depth range, ROI). Default
     /// [`TsdfConfig::default`] (1 cm voxels, no ROI).
     pub tsdf: TsdfConfig,
-    /// The odometry. Default [`OdometryConfig::default`].
+    /// The odometry. Default [`OdometryConfig::default`] with `min_inlier_ratio` 0.05: the
+    /// ratio counts inliers against every depth pixel of the frame, and a model limited to a
+    /// region of interest covers only part of the frame.
     pub odometry: OdometryConfig,
     /// The raycast that renders the model as the tracking reference. Default
     /// [`RaycastConfig::default`].
@@ -52,8 +70,12 @@ pub struct ModelTrackingConfig {
 impl Default for ModelTrackingConfig {
     fn default() -> Self {
         Self {
+            reference: TrackingReferenceKind::Keyframe,
             tsdf: TsdfConfig::default(),
-            odometry: OdometryConfig::default(),
+            odometry: OdometryConfig {
+                min_inlier_ratio: 0.05,
+                ..OdometryConfig::default()
+            },
             raycast: RaycastConfig::default(),
             keyframes: KeyframeConfig::default(),
             fallback_sigma_m: 0.05,
@@ -110,6 +132,8 @@ pub struct ModelTracker {
     previous: Option<(Isometry3<f64>, Isometry3<f64>)>,
     /// Covariance of the motion since the last keyframe (right perturbation).
     covariance_since_keyframe: Matrix6<f64>,
+    /// The last keyframe as a reference (keyframe mode) and its pose.
+    keyframe: Option<(TrackingReference, Isometry3<f64>)>,
     frames: usize,
 }
 
@@ -141,6 +165,7 @@ impl ModelTracker {
             volume,
             previous: None,
             covariance_since_keyframe: Matrix6::zeros(),
+            keyframe: None,
             frames: 0,
         })
     }
@@ -170,29 +195,65 @@ impl ModelTracker {
         check_finite_isometry(world_from_camera_estimate, "world_from_camera_estimate")
             .map_err(MappingError::Camera)?;
         let index = self.frames;
+        let odometry_config = &self.config.odometry;
+        let pyramid = frame_pyramid(frame, odometry_config.levels);
         let (world_from_camera, odometry, fell_back, odometry_ms) = match self.previous {
             None => (*world_from_camera_estimate, None, false, None),
             Some((world_from_previous, previous_estimate)) => {
                 let started = Instant::now();
-                let guess = previous_estimate.inverse() * world_from_camera_estimate;
-                let result = self.track_against_model(frame, &world_from_previous, &guess)?;
-                let ms = started.elapsed().as_secs_f64() * 1e3;
-                let (relative, fell_back) = if result.is_ok() {
-                    (result.reference_from_current, false)
-                } else {
-                    (guess, true)
+                let motion = previous_estimate.inverse() * world_from_camera_estimate;
+                let source = SourceFrame::from_pyramid(&self.camera, &pyramid, odometry_config)?;
+                // The reference and its pose: the model seen from the previous frame, or the
+                // last keyframe.
+                let (result, world_from_reference) = match (&self.config.reference, &self.keyframe)
+                {
+                    (TrackingReferenceKind::Keyframe, Some((reference, world_from_keyframe))) => {
+                        let guess = world_from_keyframe.inverse() * world_from_previous * motion;
+                        (
+                            track(reference, &source, &guess, odometry_config)?,
+                            *world_from_keyframe,
+                        )
+                    }
+                    _ => {
+                        let reference = self.model_reference(&world_from_previous)?;
+                        (
+                            track(&reference, &source, &motion, odometry_config)?,
+                            world_from_previous,
+                        )
+                    }
                 };
-                let covariance = if fell_back {
-                    None
+                let ms = started.elapsed().as_secs_f64() * 1e3;
+                let world_from_camera = if result.is_ok() {
+                    world_from_reference * result.reference_from_current
                 } else {
-                    result.information.try_inverse()
-                }
-                .filter(|c| c.iter().all(|v| v.is_finite()))
-                .unwrap_or_else(|| self.fallback_covariance());
-                self.covariance_since_keyframe =
-                    chain_covariance(&self.covariance_since_keyframe, &covariance, &relative);
+                    world_from_previous * motion
+                };
+                let covariance = result
+                    .is_ok()
+                    .then(|| result.information.try_inverse())
+                    .flatten()
+                    .filter(|c| c.iter().all(|v| v.is_finite()));
+                let from_keyframe_reference = world_from_reference != world_from_previous
+                    || self.config.reference == TrackingReferenceKind::Keyframe;
+                self.covariance_since_keyframe = match covariance {
+                    // Tracked against the keyframe itself: its covariance is the whole motion's.
+                    Some(c) if from_keyframe_reference => {
+                        chain_covariance(&Matrix6::zeros(), &c, &result.reference_from_current)
+                    }
+                    Some(c) => chain_covariance(
+                        &self.covariance_since_keyframe,
+                        &c,
+                        &result.reference_from_current,
+                    ),
+                    None => chain_covariance(
+                        &self.covariance_since_keyframe,
+                        &self.fallback_covariance(),
+                        &motion,
+                    ),
+                };
+                let fell_back = !result.is_ok();
                 (
-                    renormalized(&(world_from_previous * relative)),
+                    renormalized(&world_from_camera),
                     Some(result),
                     fell_back,
                     Some(ms),
@@ -203,13 +264,24 @@ impl ModelTracker {
         self.volume
             .integrate(frame, &self.camera, &world_from_camera)?;
         let integrate_ms = started.elapsed().as_secs_f64() * 1e3;
-        let keyframe = self.selector.offer(&world_from_camera, &frame.depth_m);
+        let mut keyframe = self.selector.offer(&world_from_camera, &frame.depth_m);
+        if fell_back && keyframe.is_none() {
+            // A failure re-anchors the keyframe reference on this frame.
+            self.selector = KeyframeSelector::new(self.config.keyframes, self.camera);
+            keyframe = self.selector.offer(&world_from_camera, &frame.depth_m);
+        }
         let keyframe_covariance = match keyframe {
             Some(_) if index > 0 => Some(self.covariance_since_keyframe),
             _ => None,
         };
         if keyframe.is_some() {
             self.covariance_since_keyframe = Matrix6::zeros();
+            if self.config.reference == TrackingReferenceKind::Keyframe {
+                self.keyframe = Some((
+                    TrackingReference::from_pyramid(&self.camera, &pyramid, odometry_config)?,
+                    world_from_camera,
+                ));
+            }
         }
         self.previous = Some((world_from_camera, *world_from_camera_estimate));
         self.frames += 1;
@@ -232,35 +304,26 @@ impl ModelTracker {
         Matrix6::from_diagonal(&Vector6::new(t, t, t, r, r, r))
     }
 
-    /// Raycasts the model at `world_from_reference` and tracks `frame` against it.
-    fn track_against_model(
+    /// The model raycast at `world_from_reference`, as a tracking reference.
+    fn model_reference(
         &self,
-        frame: &RgbdFrame,
         world_from_reference: &Isometry3<f64>,
-        guess: &Isometry3<f64>,
-    ) -> Result<OdometryResult, MappingError> {
-        let odometry = &self.config.odometry;
+    ) -> Result<TrackingReference, MappingError> {
         let model = raycast(
             &self.volume,
             &self.camera,
             world_from_reference,
             &self.config.raycast,
         )?;
-        let reference = TrackingReference::from_raycast(
+        Ok(TrackingReference::from_raycast(
             &self.camera,
             &RaycastImages {
                 intensity: gray_from_rgb(&model.rgb),
                 depth_m: model.depth_m,
                 normals: model.normals_camera,
             },
-            odometry,
-        )?;
-        let source = SourceFrame::from_pyramid(
-            &self.camera,
-            &frame_pyramid(frame, odometry.levels),
-            odometry,
-        )?;
-        Ok(track(&reference, &source, guess, odometry)?)
+            &self.config.odometry,
+        )?)
     }
 }
 

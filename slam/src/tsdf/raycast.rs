@@ -73,6 +73,15 @@ pub fn raycast(
         .matrix()
         .cast::<f32>();
     let camera_from_world_rotation = rotation.transpose();
+    // Rays are marched only through the box of the allocated blocks: outside it every voxel
+    // is unobserved.
+    let Some(bounds) = allocated_bounds(volume) else {
+        return Ok(RaycastOutput {
+            depth_m: DepthImage::filled(camera.width, camera.height, 0.0),
+            normals_camera: Image::filled(camera.width, camera.height, [0.0; 3]),
+            rgb: Image::filled(camera.width, camera.height, [0; 3]),
+        });
+    };
     let rows: Vec<Vec<RayHit>> = (0..height)
         .into_par_iter()
         .map(|v| {
@@ -84,7 +93,7 @@ pub fn raycast(
                         1.0,
                     );
                     let ray_world = rotation * ray_camera;
-                    match cast_ray(volume, &origin, &ray_world, config) {
+                    match cast_ray(volume, &origin, &ray_world, &bounds, config) {
                         Some((z, normal_world, color)) => {
                             let mut n = camera_from_world_rotation * normal_world;
                             if n.dot(&ray_camera) > 0.0 {
@@ -123,6 +132,7 @@ fn cast_ray(
     volume: &TsdfVolume,
     origin: &Vector3<f32>,
     ray: &Vector3<f32>,
+    bounds: &(Vector3<f32>, Vector3<f32>),
     config: &RaycastConfig,
 ) -> Option<(f32, Vector3<f32>, [u8; 3])> {
     let vc = volume.config();
@@ -131,9 +141,11 @@ fn cast_ray(
     let unknown_step = 0.5 * vc.block_size_m() / ray_length;
     let min_step = 0.5 * vc.voxel_size_m / ray_length;
     let at = |z: f32| Point3::from(origin + ray * z);
-    let mut z = config.min_depth_m;
+    let (enter, exit) = clip_to_box(origin, ray, bounds)?;
+    let mut z = config.min_depth_m.max(enter);
+    let z_end = config.max_depth_m.min(exit);
     let mut previous: Option<(f32, f32)> = None;
-    while z <= config.max_depth_m {
+    while z <= z_end {
         match volume.tsdf_at(&at(z), config.min_weight) {
             None => {
                 previous = None;
@@ -175,4 +187,46 @@ fn gradient(volume: &TsdfVolume, p: &Point3<f32>, min_weight: f32) -> Option<Vec
     }
     let n = g.norm();
     (n > 0.0).then(|| g / n)
+}
+
+/// The box (metres) spanned by the allocated blocks, or `None` for an empty volume.
+fn allocated_bounds(volume: &TsdfVolume) -> Option<(Vector3<f32>, Vector3<f32>)> {
+    let coords = volume.block_coords();
+    let first = coords.first()?;
+    let (mut lo, mut hi) = (*first, *first);
+    for c in coords {
+        for a in 0..3 {
+            lo[a] = lo[a].min(c[a]);
+            hi[a] = hi[a].max(c[a]);
+        }
+    }
+    let block = volume.config().block_size_m();
+    let voxel = volume.config().voxel_size_m;
+    // Voxel centres of block b span b·block … b·block + 7 voxels; one voxel of slack each side.
+    Some((
+        Vector3::from(lo.map(|c| c as f32 * block - voxel)),
+        Vector3::from(hi.map(|c| (c + 1) as f32 * block + voxel)),
+    ))
+}
+
+/// The ray parameters (z-depth) where `origin + z·ray` enters and leaves the box; `None` when
+/// it misses (slab method).
+fn clip_to_box(
+    origin: &Vector3<f32>,
+    ray: &Vector3<f32>,
+    (lo, hi): &(Vector3<f32>, Vector3<f32>),
+) -> Option<(f32, f32)> {
+    let (mut enter, mut exit) = (f32::NEG_INFINITY, f32::INFINITY);
+    for a in 0..3 {
+        if ray[a] == 0.0 {
+            if origin[a] < lo[a] || origin[a] > hi[a] {
+                return None;
+            }
+            continue;
+        }
+        let (t0, t1) = ((lo[a] - origin[a]) / ray[a], (hi[a] - origin[a]) / ray[a]);
+        enter = enter.max(t0.min(t1));
+        exit = exit.min(t0.max(t1));
+    }
+    (enter <= exit).then_some((enter, exit))
 }
