@@ -8,14 +8,15 @@ use clap::{Args, ValueEnum};
 use nalgebra::Isometry3;
 use rand::SeedableRng;
 use rand::rngs::Xoshiro256PlusPlus;
-use scarp_datasets::sequence::Sequence;
+use scarp_datasets::sequence::{Sequence, read_mask_png};
 use scarp_datasets::world::{RockRole, World};
 use scarp_export::atomic::write_bytes_atomically;
 use scarp_export::ply::{PlyEncoding, write_point_cloud};
 use scarp_slam::PointCloud;
 use serde::Serialize;
 
-use crate::detection::BoundingBox;
+use crate::detection::simulated::roles_from_boxes;
+use crate::detection::{BoundingBox, SimulatedDetector, SimulatedDetectorConfig};
 use crate::evaluation::mesh::MeshDistance;
 use crate::localization::{LocalizationConfig, Target, TargetCatalog, TargetStatus};
 
@@ -24,9 +25,10 @@ use crate::localization::{LocalizationConfig, Target, TargetCatalog, TargetStatu
 pub struct LocalizeArgs {
     /// Sequence directory (TUM RGB-D layout as written by `scarp render`).
     pub sequence: PathBuf,
-    /// Where the boxes come from: `groundtruth` (the sequence's `boxes.txt`, targets only, one
-    /// track per rock).
-    #[arg(long, value_enum, default_value_t = DetectorKind::Groundtruth)]
+    /// Where the boxes come from: `simulated` (the modelled network on the instance masks:
+    /// jitter, misses, sporadic false positives) or `groundtruth` (the sequence's `boxes.txt`,
+    /// targets only, one track per rock).
+    #[arg(long, value_enum, default_value_t = DetectorKind::Simulated)]
     pub detector: DetectorKind,
     /// Camera poses fed to the filter: the noisy state `estimate` or the `groundtruth`.
     #[arg(long, value_enum, default_value_t = PoseSource::Estimate)]
@@ -61,6 +63,9 @@ pub struct LocalizeArgs {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum DetectorKind {
+    /// [`SimulatedDetector`] with its default configuration, seeded with `--seed`, on the
+    /// sequence's instance masks; the roles of the rocks come from `boxes.txt`.
+    Simulated,
     /// Perfect boxes of the target rocks from `boxes.txt`; the rock id is the track id.
     Groundtruth,
 }
@@ -123,8 +128,10 @@ pub struct LocalizeSummary {
     pub detector: DetectorKind,
     /// Pose source.
     pub poses: PoseSource,
-    /// Live targets at the end.
+    /// Confirmed targets at the end (hit by boxes in at least `confirm_hits` frames).
     pub targets: Vec<TargetSummary>,
+    /// Live targets still unconfirmed at the end (not reported as targets).
+    pub tentative_targets: usize,
     /// Ids of live targets that match no true rock (only with ground truth).
     pub false_targets: Vec<u32>,
     /// Targets removed by the hit/miss counters during the run.
@@ -136,11 +143,7 @@ pub struct LocalizeSummary {
 }
 
 /// The `world_from_camera` of frame `index` from the chosen source.
-fn frame_pose(
-    seq: &Sequence,
-    index: usize,
-    source: PoseSource,
-) -> anyhow::Result<Isometry3<f64>> {
+fn frame_pose(seq: &Sequence, index: usize, source: PoseSource) -> anyhow::Result<Isometry3<f64>> {
     let entry = &seq.entries[index];
     let pose = match source {
         PoseSource::Estimate => entry.world_from_camera_estimate,
@@ -166,8 +169,36 @@ fn ground_truth_boxes(seq: &Sequence, index: usize) -> Vec<(u64, BoundingBox)> {
     seq.boxes
         .iter()
         .filter(|b| (b.timestamp_s - t).abs() < 1e-3 && b.role == RockRole::Target)
-        .map(|b| (u64::from(b.id), BoundingBox::from_inclusive_pixels(b.bbox_px)))
+        .map(|b| {
+            (
+                u64::from(b.id),
+                BoundingBox::from_inclusive_pixels(b.bbox_px),
+            )
+        })
         .collect()
+}
+
+/// The simulated detector's boxes in frame `index`, each its own track (no tracker): ids
+/// `index · 2²⁰ + k` never repeat, so no box inherits a target through its track id.
+fn detected_boxes(
+    detector: &mut SimulatedDetector,
+    seq: &Sequence,
+    index: usize,
+) -> anyhow::Result<Vec<(u64, BoundingBox)>> {
+    let entry = &seq.entries[index];
+    let path = entry.mask_path.as_ref().with_context(|| {
+        format!(
+            "{}: frame {index} has no instance mask, which the simulated detector needs",
+            seq.dir.display()
+        )
+    })?;
+    let mask = read_mask_png(path)?;
+    let detections = detector.detect_mask(&mask, entry.timestamp_s);
+    Ok(detections
+        .iter()
+        .enumerate()
+        .map(|(k, d)| (((index as u64) << 20) + k as u64, d.bbox))
+        .collect())
 }
 
 /// Ground-truth comparison of one target: the nearest rock within `radius_m`, the centroid
@@ -258,13 +289,24 @@ pub fn localize(args: &LocalizeArgs) -> anyhow::Result<LocalizeSummary> {
         )
     };
     let mut catalog = TargetCatalog::new(config)?;
+    let mut detector = match args.detector {
+        DetectorKind::Simulated => Some(SimulatedDetector::new(
+            SimulatedDetectorConfig {
+                seed: args.seed,
+                ..SimulatedDetectorConfig::default()
+            },
+            roles_from_boxes(&seq.boxes),
+        )?),
+        DetectorKind::Groundtruth => None,
+    };
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(args.seed);
     let mut merged = 0;
     let bar = super::progress_bar(seq.len() as u64, "localizing");
     for index in 0..seq.len() {
         let world_from_camera = frame_pose(&seq, index, args.poses)?;
-        let boxes = match args.detector {
-            DetectorKind::Groundtruth => ground_truth_boxes(&seq, index),
+        let boxes = match detector.as_mut() {
+            Some(detector) => detected_boxes(detector, &seq, index)?,
+            None => ground_truth_boxes(&seq, index),
         };
         let report = catalog
             .observe(&seq.camera, &world_from_camera, &boxes, &mut rng)
@@ -282,7 +324,12 @@ pub fn localize(args: &LocalizeArgs) -> anyhow::Result<LocalizeSummary> {
 
     let mut targets = Vec::new();
     let mut false_targets = Vec::new();
+    let mut tentative = 0;
     for target in catalog.targets() {
+        if !target.is_confirmed(catalog.config()) {
+            tentative += 1;
+            continue;
+        }
         let c = target.center();
         let mut summary = TargetSummary {
             id: target.id(),
@@ -325,6 +372,7 @@ pub fn localize(args: &LocalizeArgs) -> anyhow::Result<LocalizeSummary> {
         poses: args.poses,
         targets,
         false_targets,
+        tentative_targets: tentative,
         removed_targets: catalog.removed_count(),
         merged_targets: merged,
         seconds: started.elapsed().as_secs_f64(),

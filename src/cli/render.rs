@@ -4,12 +4,12 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use clap::{Args, ValueEnum};
+use nalgebra::{Isometry3, Point3, Vector3};
 use scarp_datasets::estimator::EstimatorConfig;
 use scarp_datasets::paths;
 use scarp_datasets::sensor::SensorConfig;
 use scarp_datasets::sequence::{RenderSettings, SequenceSummary, write_sequence};
 use scarp_datasets::world::World;
-use nalgebra::{Isometry3, Point3, Vector3};
 use scarp_export::tum::StampedPose;
 use scarp_planning::camera::CameraConfig;
 use scarp_planning::finelocalize::{FineLocalizeConfig, plan_fine_localization, view_direction};
@@ -207,19 +207,12 @@ fn fine_circle_path(
         Some(pose) => {
             // Heading of the camera's optical axis projected on the ground.
             let axis = pose.rotation * Vector3::z();
-            Waypoint::new(
-                Point3::from(pose.translation.vector),
-                axis.y.atan2(axis.x),
-            )
+            Waypoint::new(Point3::from(pose.translation.vector), axis.y.atan2(axis.x))
         }
         None => {
             let radius = (search_altitude_m - rock.centroid.z) / cam_cfg.pitch_down_rad().tan();
             Waypoint::new(
-                Point3::new(
-                    rock.centroid.x + radius,
-                    rock.centroid.y,
-                    search_altitude_m,
-                ),
+                Point3::new(rock.centroid.x + radius, rock.centroid.y, search_altitude_m),
                 std::f64::consts::PI,
             )
         }
@@ -234,7 +227,9 @@ fn fine_circle_path(
     .with_context(|| format!("planning the fine-localization circle of rock {}", rock.id))?;
     // The arc: the last `waypoints` of the path (the first may be the current pose).
     let arc = &plan.path.waypoints;
-    let arc = &arc[arc.len().saturating_sub(FineLocalizeConfig::default().waypoints + 1)..];
+    let arc = &arc[arc
+        .len()
+        .saturating_sub(FineLocalizeConfig::default().waypoints + 1)..];
     let arc: Vec<&Waypoint> = arc
         .iter()
         .filter(|w| {
