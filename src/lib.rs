@@ -10,3 +10,4 @@ pub mod detection;
 pub mod evaluation;
 pub mod fragility;
 pub mod localization;
+pub mod tracking;

@@ -36,6 +36,7 @@
 
 pub mod ba;
 pub mod error;
+pub mod features;
 pub mod frame;
 pub mod geometry;
 pub mod image;
