@@ -8,17 +8,20 @@ use clap::{Args, ValueEnum};
 use nalgebra::Isometry3;
 use rand::SeedableRng;
 use rand::rngs::Xoshiro256PlusPlus;
-use scarp_datasets::sequence::{Sequence, read_mask_png};
+use scarp_datasets::sequence::{Sequence, read_mask_png, read_rgb_png};
 use scarp_datasets::world::{RockRole, World};
 use scarp_export::atomic::write_bytes_atomically;
 use scarp_export::ply::{PlyEncoding, write_point_cloud};
 use scarp_slam::PointCloud;
+use scarp_slam::image::gray_from_rgb;
 use serde::Serialize;
 
 use crate::detection::simulated::roles_from_boxes;
-use crate::detection::{BoundingBox, SimulatedDetector, SimulatedDetectorConfig};
+use crate::detection::{BoundingBox, Detection, SimulatedDetector, SimulatedDetectorConfig};
 use crate::evaluation::mesh::MeshDistance;
+use crate::localization::check_box;
 use crate::localization::{LocalizationConfig, Target, TargetCatalog, TargetStatus};
+use crate::tracking::{Tracker, TrackerConfig};
 
 /// Localize targets in a sequence with the bounding-box depth filter.
 #[derive(Debug, Args)]
@@ -30,6 +33,11 @@ pub struct LocalizeArgs {
     /// targets only, one track per rock).
     #[arg(long, value_enum, default_value_t = DetectorKind::Simulated)]
     pub detector: DetectorKind,
+    /// Bounding-box tracker between the detector and the filter: `klt` (Kalman filter with KLT
+    /// prediction; only confirmed tracks reach the filter) or `none` (every detection is fed
+    /// directly, as its own track).
+    #[arg(long, value_enum, default_value_t = TrackerKind::Klt)]
+    pub tracker: TrackerKind,
     /// Camera poses fed to the filter: the noisy state `estimate` or the `groundtruth`.
     #[arg(long, value_enum, default_value_t = PoseSource::Estimate)]
     pub poses: PoseSource,
@@ -68,6 +76,16 @@ pub enum DetectorKind {
     Simulated,
     /// Perfect boxes of the target rocks from `boxes.txt`; the rock id is the track id.
     Groundtruth,
+}
+
+/// The tracker stage.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TrackerKind {
+    /// [`Tracker`] with its default configuration, on the grey image of each frame.
+    Klt,
+    /// No tracker: detections go straight to the depth filter.
+    None,
 }
 
 /// Which poses drive the filter.
@@ -126,6 +144,8 @@ pub struct LocalizeSummary {
     pub frames: usize,
     /// Box source.
     pub detector: DetectorKind,
+    /// Tracker stage.
+    pub tracker: TrackerKind,
     /// Pose source.
     pub poses: PoseSource,
     /// Confirmed targets at the end (hit by boxes in at least `confirm_hits` frames).
@@ -162,29 +182,27 @@ fn frame_pose(seq: &Sequence, index: usize, source: PoseSource) -> anyhow::Resul
     })
 }
 
-/// The boxes `(track id, box)` of frame `index` from `boxes.txt`: target rocks only, matched by
-/// timestamp (within 1 ms).
-fn ground_truth_boxes(seq: &Sequence, index: usize) -> Vec<(u64, BoundingBox)> {
+/// Perfect detections of the target rocks in frame `index`, from `boxes.txt` (matched by
+/// timestamp within 1 ms), score 1.
+fn ground_truth_detections(seq: &Sequence, index: usize) -> Vec<Detection> {
     let t = seq.entries[index].timestamp_s;
     seq.boxes
         .iter()
         .filter(|b| (b.timestamp_s - t).abs() < 1e-3 && b.role == RockRole::Target)
-        .map(|b| {
-            (
-                u64::from(b.id),
-                BoundingBox::from_inclusive_pixels(b.bbox_px),
-            )
+        .map(|b| Detection {
+            bbox: BoundingBox::from_inclusive_pixels(b.bbox_px),
+            score: 1.0,
+            class_id: 0,
         })
         .collect()
 }
 
-/// The simulated detector's boxes in frame `index`, each its own track (no tracker): ids
-/// `index · 2²⁰ + k` never repeat, so no box inherits a target through its track id.
-fn detected_boxes(
+/// The simulated detector's detections in frame `index` (from its instance mask).
+fn detect(
     detector: &mut SimulatedDetector,
     seq: &Sequence,
     index: usize,
-) -> anyhow::Result<Vec<(u64, BoundingBox)>> {
+) -> anyhow::Result<Vec<Detection>> {
     let entry = &seq.entries[index];
     let path = entry.mask_path.as_ref().with_context(|| {
         format!(
@@ -193,11 +211,34 @@ fn detected_boxes(
         )
     })?;
     let mask = read_mask_png(path)?;
-    let detections = detector.detect_mask(&mask, entry.timestamp_s);
-    Ok(detections
+    Ok(detector.detect_mask(&mask, entry.timestamp_s))
+}
+
+/// Steps the tracker on frame `index` and returns its confirmed tracks `(track id, box)` that
+/// are usable boxes in the image (others are skipped with a warning).
+fn tracked_boxes(
+    tracker: &mut Tracker,
+    seq: &Sequence,
+    index: usize,
+    detections: &[Detection],
+) -> anyhow::Result<Vec<(u64, BoundingBox)>> {
+    let entry = &seq.entries[index];
+    let rgb = read_rgb_png(&entry.rgb_path)?;
+    let tracks = tracker
+        .step(&gray_from_rgb(&rgb), detections)
+        .with_context(|| format!("tracking frame {index} of {}", seq.dir.display()))?;
+    let (w, h) = (seq.camera.width, seq.camera.height);
+    Ok(tracks
         .iter()
-        .enumerate()
-        .map(|(k, d)| (((index as u64) << 20) + k as u64, d.bbox))
+        .filter(|t| t.confirmed)
+        .filter(|t| match check_box(&t.bbox, 0, w, h) {
+            Ok(()) => true,
+            Err(e) => {
+                tracing::warn!(frame = index, track = t.id, "skipping track: {e}");
+                false
+            }
+        })
+        .map(|t| (t.id, t.bbox))
         .collect())
 }
 
@@ -289,6 +330,10 @@ pub fn localize(args: &LocalizeArgs) -> anyhow::Result<LocalizeSummary> {
         )
     };
     let mut catalog = TargetCatalog::new(config)?;
+    let mut tracker = match args.tracker {
+        TrackerKind::Klt => Some(Tracker::new(TrackerConfig::default())?),
+        TrackerKind::None => None,
+    };
     let mut detector = match args.detector {
         DetectorKind::Simulated => Some(SimulatedDetector::new(
             SimulatedDetectorConfig {
@@ -304,9 +349,19 @@ pub fn localize(args: &LocalizeArgs) -> anyhow::Result<LocalizeSummary> {
     let bar = super::progress_bar(seq.len() as u64, "localizing");
     for index in 0..seq.len() {
         let world_from_camera = frame_pose(&seq, index, args.poses)?;
-        let boxes = match detector.as_mut() {
-            Some(detector) => detected_boxes(detector, &seq, index)?,
-            None => ground_truth_boxes(&seq, index),
+        let detections = match detector.as_mut() {
+            Some(detector) => detect(detector, &seq, index)?,
+            None => ground_truth_detections(&seq, index),
+        };
+        let boxes = match tracker.as_mut() {
+            Some(tracker) => tracked_boxes(tracker, &seq, index, &detections)?,
+            // Each detection its own track: ids `index · 2²⁰ + k` never repeat, so no box
+            // inherits a target through its track id.
+            None => detections
+                .iter()
+                .enumerate()
+                .map(|(k, d)| (((index as u64) << 20) + k as u64, d.bbox))
+                .collect(),
         };
         let report = catalog
             .observe(&seq.camera, &world_from_camera, &boxes, &mut rng)
@@ -369,6 +424,7 @@ pub fn localize(args: &LocalizeArgs) -> anyhow::Result<LocalizeSummary> {
         sequence: args.sequence.display().to_string(),
         frames: seq.len(),
         detector: args.detector,
+        tracker: args.tracker,
         poses: args.poses,
         targets,
         false_targets,
