@@ -38,6 +38,11 @@ pub struct LocalizeArgs {
     /// directly, as its own track).
     #[arg(long, value_enum, default_value_t = TrackerKind::Klt)]
     pub tracker: TrackerKind,
+    /// Also feed the filter confirmed tracks that no detection updated in this frame (boxes
+    /// predicted by KLT alone). Off by default: on sparse frames the prediction drifts, and a
+    /// drifted box on a keyframe pulls the points away.
+    #[arg(long)]
+    pub predicted_boxes: bool,
     /// Camera poses fed to the filter: the noisy state `estimate` or the `groundtruth`.
     #[arg(long, value_enum, default_value_t = PoseSource::Estimate)]
     pub poses: PoseSource,
@@ -215,12 +220,14 @@ fn detect(
 }
 
 /// Steps the tracker on frame `index` and returns its confirmed tracks `(track id, box)` that
-/// are usable boxes in the image (others are skipped with a warning).
+/// are usable boxes in the image (others are skipped with a warning); with `updated_only`, only
+/// the tracks a detection updated in this frame.
 fn tracked_boxes(
     tracker: &mut Tracker,
     seq: &Sequence,
     index: usize,
     detections: &[Detection],
+    updated_only: bool,
 ) -> anyhow::Result<Vec<(u64, BoundingBox)>> {
     let entry = &seq.entries[index];
     let rgb = read_rgb_png(&entry.rgb_path)?;
@@ -230,7 +237,7 @@ fn tracked_boxes(
     let (w, h) = (seq.camera.width, seq.camera.height);
     Ok(tracks
         .iter()
-        .filter(|t| t.confirmed)
+        .filter(|t| t.confirmed && (t.updated || !updated_only))
         .filter(|t| match check_box(&t.bbox, 0, w, h) {
             Ok(()) => true,
             Err(e) => {
@@ -354,7 +361,9 @@ pub fn localize(args: &LocalizeArgs) -> anyhow::Result<LocalizeSummary> {
             None => ground_truth_detections(&seq, index),
         };
         let boxes = match tracker.as_mut() {
-            Some(tracker) => tracked_boxes(tracker, &seq, index, &detections)?,
+            Some(tracker) => {
+                tracked_boxes(tracker, &seq, index, &detections, !args.predicted_boxes)?
+            }
             // Each detection its own track: ids `index · 2²⁰ + k` never repeat, so no box
             // inherits a target through its track id.
             None => detections
