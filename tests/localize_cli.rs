@@ -47,12 +47,14 @@ fn render(dir: &Path) {
     ]);
 }
 
-fn localize(seq: &Path, out: &Path, poses: &str) -> serde_json::Value {
+fn localize(seq: &Path, out: &Path, poses: &str, tracker: &str) -> serde_json::Value {
     let stdout = scarp_ok(&[
         "localize",
         path_str(seq),
         "--detector",
         "simulated",
+        "--tracker",
+        tracker,
         "--poses",
         poses,
         "--out",
@@ -97,7 +99,7 @@ fn lawnmower_and_circle_localize_target_one() {
     render(&seq);
 
     let out_gt = dir.path().join("gt");
-    let json = localize(&seq, &out_gt, "groundtruth");
+    let json = localize(&seq, &out_gt, "groundtruth", "klt");
     let t = rock_one(&json, &out_gt);
     let error_m = t["centroid_error_m"].as_f64().unwrap();
     assert!(
@@ -115,7 +117,7 @@ fn lawnmower_and_circle_localize_target_one() {
     // walk (σ 0.5 m horizontal, 0.8 m vertical, 30 s correlation) is nearly constant over this
     // 5 s sequence and no filter can see it. The depth filter must add little to that bias.
     let out_est = dir.path().join("est");
-    let json = localize(&seq, &out_est, "estimate");
+    let json = localize(&seq, &out_est, "estimate", "klt");
     let t = rock_one(&json, &out_est);
     let error_m = t["centroid_error_m"].as_f64().unwrap();
     let bias_m = mean_pose_bias_m(&seq);
