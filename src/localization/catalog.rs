@@ -90,8 +90,8 @@ impl TargetCatalog {
     /// Deterministic for a given `rng` state; boxes are processed in the given order.
     ///
     /// # Errors
-    /// Invalid camera, non-finite pose, or a box that is degenerate or outside the image;
-    /// nothing is changed then.
+    /// Invalid camera, non-finite pose, or a box that is degenerate or outside the image; these
+    /// are checked first, so the catalog is unchanged then.
     pub fn observe<R: rand::Rng + ?Sized>(
         &mut self,
         camera: &PinholeCamera,
