@@ -34,7 +34,14 @@ mod tests {
     fn defaults_print_and_parse_back() {
         let text = defaults_toml().unwrap();
         let value: toml::Table = toml::from_str(&text).unwrap();
-        for section in ["sensor", "estimator", "planning", "fragility", "detection"] {
+        for section in [
+            "sensor",
+            "estimator",
+            "planning",
+            "fragility",
+            "detection",
+            "localization",
+        ] {
             assert!(value.contains_key(section), "{section}");
         }
         let sensor: scarp_datasets::sensor::SensorConfig =
@@ -46,6 +53,12 @@ mod tests {
         assert_eq!(
             simulated,
             crate::detection::SimulatedDetectorConfig::default()
+        );
+        let localization: crate::localization::LocalizationConfig =
+            value["localization"].clone().try_into().unwrap();
+        assert_eq!(
+            localization,
+            crate::localization::LocalizationConfig::default()
         );
     }
 }

@@ -8,26 +8,41 @@ use clap::{Args, ValueEnum};
 use nalgebra::Isometry3;
 use rand::SeedableRng;
 use rand::rngs::Xoshiro256PlusPlus;
-use scarp_datasets::sequence::Sequence;
+use scarp_datasets::sequence::{Sequence, read_mask_png, read_rgb_png};
 use scarp_datasets::world::{RockRole, World};
 use scarp_export::atomic::write_bytes_atomically;
 use scarp_export::ply::{PlyEncoding, write_point_cloud};
 use scarp_slam::PointCloud;
+use scarp_slam::image::gray_from_rgb;
 use serde::Serialize;
 
-use crate::detection::BoundingBox;
+use crate::detection::simulated::roles_from_boxes;
+use crate::detection::{BoundingBox, Detection, SimulatedDetector, SimulatedDetectorConfig};
 use crate::evaluation::mesh::MeshDistance;
+use crate::localization::check_box;
 use crate::localization::{LocalizationConfig, Target, TargetCatalog, TargetStatus};
+use crate::tracking::{Tracker, TrackerConfig};
 
 /// Localize targets in a sequence with the bounding-box depth filter.
 #[derive(Debug, Args)]
 pub struct LocalizeArgs {
     /// Sequence directory (TUM RGB-D layout as written by `scarp render`).
     pub sequence: PathBuf,
-    /// Where the boxes come from: `groundtruth` (the sequence's `boxes.txt`, targets only, one
-    /// track per rock).
-    #[arg(long, value_enum, default_value_t = DetectorKind::Groundtruth)]
+    /// Where the boxes come from: `simulated` (the modelled network on the instance masks:
+    /// jitter, misses, sporadic false positives) or `groundtruth` (the sequence's `boxes.txt`,
+    /// targets only, one track per rock).
+    #[arg(long, value_enum, default_value_t = DetectorKind::Simulated)]
     pub detector: DetectorKind,
+    /// Bounding-box tracker between the detector and the filter: `klt` (Kalman filter with KLT
+    /// prediction; only confirmed tracks reach the filter) or `none` (every detection is fed
+    /// directly, as its own track).
+    #[arg(long, value_enum, default_value_t = TrackerKind::Klt)]
+    pub tracker: TrackerKind,
+    /// Also feed the filter confirmed tracks that no detection updated in this frame (boxes
+    /// predicted by KLT alone). Off by default: on sparse frames the prediction drifts, and a
+    /// drifted box on a keyframe pulls the points away.
+    #[arg(long)]
+    pub predicted_boxes: bool,
     /// Camera poses fed to the filter: the noisy state `estimate` or the `groundtruth`.
     #[arg(long, value_enum, default_value_t = PoseSource::Estimate)]
     pub poses: PoseSource,
@@ -61,8 +76,21 @@ pub struct LocalizeArgs {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum DetectorKind {
+    /// [`SimulatedDetector`] with its default configuration, seeded with `--seed`, on the
+    /// sequence's instance masks; the roles of the rocks come from `boxes.txt`.
+    Simulated,
     /// Perfect boxes of the target rocks from `boxes.txt`; the rock id is the track id.
     Groundtruth,
+}
+
+/// The tracker stage.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TrackerKind {
+    /// [`Tracker`] with its default configuration, on the grey image of each frame.
+    Klt,
+    /// No tracker: detections go straight to the depth filter.
+    None,
 }
 
 /// Which poses drive the filter.
@@ -121,10 +149,14 @@ pub struct LocalizeSummary {
     pub frames: usize,
     /// Box source.
     pub detector: DetectorKind,
+    /// Tracker stage.
+    pub tracker: TrackerKind,
     /// Pose source.
     pub poses: PoseSource,
-    /// Live targets at the end.
+    /// Confirmed targets at the end (hit by boxes in at least `confirm_hits` frames).
     pub targets: Vec<TargetSummary>,
+    /// Live targets still unconfirmed at the end (not reported as targets).
+    pub tentative_targets: usize,
     /// Ids of live targets that match no true rock (only with ground truth).
     pub false_targets: Vec<u32>,
     /// Targets removed by the hit/miss counters during the run.
@@ -136,11 +168,7 @@ pub struct LocalizeSummary {
 }
 
 /// The `world_from_camera` of frame `index` from the chosen source.
-fn frame_pose(
-    seq: &Sequence,
-    index: usize,
-    source: PoseSource,
-) -> anyhow::Result<Isometry3<f64>> {
+fn frame_pose(seq: &Sequence, index: usize, source: PoseSource) -> anyhow::Result<Isometry3<f64>> {
     let entry = &seq.entries[index];
     let pose = match source {
         PoseSource::Estimate => entry.world_from_camera_estimate,
@@ -159,15 +187,66 @@ fn frame_pose(
     })
 }
 
-/// The boxes `(track id, box)` of frame `index` from `boxes.txt`: target rocks only, matched by
-/// timestamp (within 1 ms).
-fn ground_truth_boxes(seq: &Sequence, index: usize) -> Vec<(u64, BoundingBox)> {
+/// Perfect detections of the target rocks in frame `index`, from `boxes.txt` (matched by
+/// timestamp within 1 ms), score 1.
+fn ground_truth_detections(seq: &Sequence, index: usize) -> Vec<Detection> {
     let t = seq.entries[index].timestamp_s;
     seq.boxes
         .iter()
         .filter(|b| (b.timestamp_s - t).abs() < 1e-3 && b.role == RockRole::Target)
-        .map(|b| (u64::from(b.id), BoundingBox::from_inclusive_pixels(b.bbox_px)))
+        .map(|b| Detection {
+            bbox: BoundingBox::from_inclusive_pixels(b.bbox_px),
+            score: 1.0,
+            class_id: 0,
+        })
         .collect()
+}
+
+/// The simulated detector's detections in frame `index` (from its instance mask).
+fn detect(
+    detector: &mut SimulatedDetector,
+    seq: &Sequence,
+    index: usize,
+) -> anyhow::Result<Vec<Detection>> {
+    let entry = &seq.entries[index];
+    let path = entry.mask_path.as_ref().with_context(|| {
+        format!(
+            "{}: frame {index} has no instance mask, which the simulated detector needs",
+            seq.dir.display()
+        )
+    })?;
+    let mask = read_mask_png(path)?;
+    Ok(detector.detect_mask(&mask, entry.timestamp_s))
+}
+
+/// Steps the tracker on frame `index` and returns its confirmed tracks `(track id, box)` that
+/// are usable boxes in the image (others are skipped with a warning); with `updated_only`, only
+/// the tracks a detection updated in this frame.
+fn tracked_boxes(
+    tracker: &mut Tracker,
+    seq: &Sequence,
+    index: usize,
+    detections: &[Detection],
+    updated_only: bool,
+) -> anyhow::Result<Vec<(u64, BoundingBox)>> {
+    let entry = &seq.entries[index];
+    let rgb = read_rgb_png(&entry.rgb_path)?;
+    let tracks = tracker
+        .step(&gray_from_rgb(&rgb), detections)
+        .with_context(|| format!("tracking frame {index} of {}", seq.dir.display()))?;
+    let (w, h) = (seq.camera.width, seq.camera.height);
+    Ok(tracks
+        .iter()
+        .filter(|t| t.confirmed && (t.updated || !updated_only))
+        .filter(|t| match check_box(&t.bbox, 0, w, h) {
+            Ok(()) => true,
+            Err(e) => {
+                tracing::warn!(frame = index, track = t.id, "skipping track: {e}");
+                false
+            }
+        })
+        .map(|t| (t.id, t.bbox))
+        .collect())
 }
 
 /// Ground-truth comparison of one target: the nearest rock within `radius_m`, the centroid
@@ -258,13 +337,40 @@ pub fn localize(args: &LocalizeArgs) -> anyhow::Result<LocalizeSummary> {
         )
     };
     let mut catalog = TargetCatalog::new(config)?;
+    let mut tracker = match args.tracker {
+        TrackerKind::Klt => Some(Tracker::new(TrackerConfig::default())?),
+        TrackerKind::None => None,
+    };
+    let mut detector = match args.detector {
+        DetectorKind::Simulated => Some(SimulatedDetector::new(
+            SimulatedDetectorConfig {
+                seed: args.seed,
+                ..SimulatedDetectorConfig::default()
+            },
+            roles_from_boxes(&seq.boxes),
+        )?),
+        DetectorKind::Groundtruth => None,
+    };
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(args.seed);
     let mut merged = 0;
     let bar = super::progress_bar(seq.len() as u64, "localizing");
     for index in 0..seq.len() {
         let world_from_camera = frame_pose(&seq, index, args.poses)?;
-        let boxes = match args.detector {
-            DetectorKind::Groundtruth => ground_truth_boxes(&seq, index),
+        let detections = match detector.as_mut() {
+            Some(detector) => detect(detector, &seq, index)?,
+            None => ground_truth_detections(&seq, index),
+        };
+        let boxes = match tracker.as_mut() {
+            Some(tracker) => {
+                tracked_boxes(tracker, &seq, index, &detections, !args.predicted_boxes)?
+            }
+            // Each detection its own track: ids `index · 2²⁰ + k` never repeat, so no box
+            // inherits a target through its track id.
+            None => detections
+                .iter()
+                .enumerate()
+                .map(|(k, d)| (((index as u64) << 20) + k as u64, d.bbox))
+                .collect(),
         };
         let report = catalog
             .observe(&seq.camera, &world_from_camera, &boxes, &mut rng)
@@ -282,7 +388,12 @@ pub fn localize(args: &LocalizeArgs) -> anyhow::Result<LocalizeSummary> {
 
     let mut targets = Vec::new();
     let mut false_targets = Vec::new();
+    let mut tentative = 0;
     for target in catalog.targets() {
+        if !target.is_confirmed(catalog.config()) {
+            tentative += 1;
+            continue;
+        }
         let c = target.center();
         let mut summary = TargetSummary {
             id: target.id(),
@@ -322,9 +433,11 @@ pub fn localize(args: &LocalizeArgs) -> anyhow::Result<LocalizeSummary> {
         sequence: args.sequence.display().to_string(),
         frames: seq.len(),
         detector: args.detector,
+        tracker: args.tracker,
         poses: args.poses,
         targets,
         false_targets,
+        tentative_targets: tentative,
         removed_targets: catalog.removed_count(),
         merged_targets: merged,
         seconds: started.elapsed().as_secs_f64(),

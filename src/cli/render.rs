@@ -4,12 +4,12 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use clap::{Args, ValueEnum};
+use nalgebra::{Isometry3, Point3, Vector3};
 use scarp_datasets::estimator::EstimatorConfig;
 use scarp_datasets::paths;
 use scarp_datasets::sensor::SensorConfig;
 use scarp_datasets::sequence::{RenderSettings, SequenceSummary, write_sequence};
 use scarp_datasets::world::World;
-use nalgebra::{Isometry3, Point3, Vector3};
 use scarp_export::tum::StampedPose;
 use scarp_planning::camera::CameraConfig;
 use scarp_planning::finelocalize::{FineLocalizeConfig, plan_fine_localization, view_direction};
@@ -100,16 +100,18 @@ pub fn render_sequence(args: &RenderArgs) -> anyhow::Result<SequenceSummary> {
                     fine_circle_path(&world, args, current.as_ref())?,
                 )
             }
-            file => (
-                PathKind::File,
-                paths::from_tum_file(std::path::Path::new(file))?,
-            ),
+            file => {
+                anyhow::ensure!(
+                    args.path == name,
+                    "a trajectory file cannot be joined with other paths (`{}`)",
+                    args.path
+                );
+                (
+                    PathKind::File,
+                    paths::from_tum_file(std::path::Path::new(file))?,
+                )
+            }
         };
-        anyhow::ensure!(
-            kind != PathKind::File || args.path == name,
-            "a trajectory file cannot be joined with other paths (`{}`)",
-            args.path
-        );
         // Joined paths continue the frame clock.
         let offset_s = poses
             .last()
@@ -207,19 +209,12 @@ fn fine_circle_path(
         Some(pose) => {
             // Heading of the camera's optical axis projected on the ground.
             let axis = pose.rotation * Vector3::z();
-            Waypoint::new(
-                Point3::from(pose.translation.vector),
-                axis.y.atan2(axis.x),
-            )
+            Waypoint::new(Point3::from(pose.translation.vector), axis.y.atan2(axis.x))
         }
         None => {
             let radius = (search_altitude_m - rock.centroid.z) / cam_cfg.pitch_down_rad().tan();
             Waypoint::new(
-                Point3::new(
-                    rock.centroid.x + radius,
-                    rock.centroid.y,
-                    search_altitude_m,
-                ),
+                Point3::new(rock.centroid.x + radius, rock.centroid.y, search_altitude_m),
                 std::f64::consts::PI,
             )
         }
@@ -234,7 +229,9 @@ fn fine_circle_path(
     .with_context(|| format!("planning the fine-localization circle of rock {}", rock.id))?;
     // The arc: the last `waypoints` of the path (the first may be the current pose).
     let arc = &plan.path.waypoints;
-    let arc = &arc[arc.len().saturating_sub(FineLocalizeConfig::default().waypoints + 1)..];
+    let arc = &arc[arc
+        .len()
+        .saturating_sub(FineLocalizeConfig::default().waypoints + 1)..];
     let arc: Vec<&Waypoint> = arc
         .iter()
         .filter(|w| {
@@ -289,4 +286,73 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn args(path: &str) -> RenderArgs {
+        RenderArgs {
+            world: "default".into(),
+            path: path.into(),
+            frames: 30,
+            target: Some(1),
+            altitude: 10.0,
+            area_m: 30.0,
+            out: PathBuf::from("unused"),
+            seed: 0,
+            no_noise: true,
+            depth_scale: None,
+            json: false,
+        }
+    }
+
+    #[test]
+    fn fine_circle_looks_at_the_target_from_the_search_altitude() {
+        let world = World::builtin_default().unwrap();
+        let rock = world.rock(1).unwrap();
+        let poses = fine_circle_path(&world, &args("finecircle"), None).unwrap();
+        assert_eq!(poses.len(), 30);
+        // C_e: the mean of the points given to the planner (the rock's vertices).
+        let ce = rock
+            .mesh
+            .positions
+            .iter()
+            .fold(Vector3::zeros(), |acc, p| acc + p.coords.cast::<f64>())
+            / rock.mesh.positions.len() as f64;
+        let h_s = paths::mean_terrain_height_m(&world) + 10.0;
+        let radius = (h_s - ce.z) / 55f64.to_radians().tan();
+        let mut turned = 0.0;
+        for w in poses.windows(2) {
+            let (a, b) = (&w[0].world_from_camera, &w[1].world_from_camera);
+            let (pa, pb) = (a.translation.vector, b.translation.vector);
+            turned += (pa.xy() - ce.xy()).angle(&(pb.xy() - ce.xy()));
+        }
+        for p in &poses {
+            let eye = p.world_from_camera.translation.vector;
+            assert!((eye.z - h_s).abs() < 1e-9);
+            assert!(((eye.xy() - ce.xy()).norm() - radius).abs() < 1e-6);
+            // The optical axis passes through C_e, pitched 55° down.
+            let axis = p.world_from_camera.rotation * Vector3::z();
+            assert!((axis.z + 55f64.to_radians().sin()).abs() < 1e-9);
+            let to_rock = (ce - eye).normalize();
+            assert!(axis.dot(&to_rock) > 1.0 - 1e-9);
+        }
+        // Two full turns.
+        assert!(
+            (turned.to_degrees() - 720.0).abs() < 1.0,
+            "{}",
+            turned.to_degrees()
+        );
+    }
+
+    #[test]
+    fn unknown_target_is_an_error() {
+        let world = World::builtin_default().unwrap();
+        let mut a = args("finecircle");
+        a.target = Some(999);
+        let err = fine_circle_path(&world, &a, None).unwrap_err();
+        assert!(err.to_string().contains("999"), "{err}");
+    }
 }

@@ -90,8 +90,8 @@ impl TargetCatalog {
     /// Deterministic for a given `rng` state; boxes are processed in the given order.
     ///
     /// # Errors
-    /// Invalid camera, non-finite pose, or a box that is degenerate or outside the image;
-    /// nothing is changed then.
+    /// Invalid camera, non-finite pose, or a box that is degenerate or outside the image; these
+    /// are checked first, so the catalog is unchanged then.
     pub fn observe<R: rand::Rng + ?Sized>(
         &mut self,
         camera: &PinholeCamera,
@@ -212,7 +212,9 @@ impl TargetCatalog {
             let c = camera_from_world * t.center();
             let in_view = c.z > 0.0
                 && c.z <= cfg.max_depth_m
-                && camera.project(&c).is_some_and(|px| camera.in_bounds(&px, 0.0));
+                && camera
+                    .project(&c)
+                    .is_some_and(|px| camera.in_bounds(&px, 0.0));
             if in_view {
                 t.misses += 1;
             }
@@ -243,15 +245,20 @@ impl TargetCatalog {
             while j < self.targets.len() {
                 let (a, b) = (&self.targets[i], &self.targets[j]);
                 let close = (a.center() - b.center()).norm() < self.config.merge_distance_m;
-                if a.status == TargetStatus::Converged && b.status == TargetStatus::Converged && close
+                if a.status == TargetStatus::Converged
+                    && b.status == TargetStatus::Converged
+                    && close
                 {
                     let absorbed = self.targets.remove(j);
                     let kept = &mut self.targets[i];
-                    let union: Vec<Point3<f64>> =
-                        kept.points.iter().chain(&absorbed.points).copied().collect();
+                    let union: Vec<Point3<f64>> = kept
+                        .points
+                        .iter()
+                        .chain(&absorbed.points)
+                        .copied()
+                        .collect();
                     let weights = vec![1.0; union.len()];
-                    if let Some(picks) = low_variance_resample(&weights, kept.points.len(), rng)
-                    {
+                    if let Some(picks) = low_variance_resample(&weights, kept.points.len(), rng) {
                         let points: Vec<_> = picks.into_iter().map(|k| union[k]).collect();
                         if let Ok(g) = super::Gaussian3::from_points(&points) {
                             kept.points = points;
@@ -312,7 +319,9 @@ mod tests {
         for k in 0..2 * n {
             let pose = circle_pose(&rock, k, n);
             let bbox = sphere_box(&cam, &pose, &rock, 0.5);
-            catalog.observe(&cam, &pose, &[(7, bbox)], &mut rng).unwrap();
+            catalog
+                .observe(&cam, &pose, &[(7, bbox)], &mut rng)
+                .unwrap();
         }
         assert_eq!(catalog.targets().len(), 1);
         let t = &catalog.targets()[0];
@@ -354,7 +363,9 @@ mod tests {
             for k in 0..30 {
                 let pose = circle_pose(&rock, k, 30);
                 let bbox = sphere_box(&cam, &pose, &rock, 0.5);
-                catalog.observe(&cam, &pose, &[(1, bbox)], &mut rng).unwrap();
+                catalog
+                    .observe(&cam, &pose, &[(1, bbox)], &mut rng)
+                    .unwrap();
             }
             catalog.targets()[0].points().to_vec()
         };
@@ -374,26 +385,44 @@ mod tests {
             y_max: 50.0,
         };
         let err = catalog
-            .observe(&cam, &Isometry3::identity(), &[(1, ok), (2, zero_area)], &mut rng)
+            .observe(
+                &cam,
+                &Isometry3::identity(),
+                &[(1, ok), (2, zero_area)],
+                &mut rng,
+            )
             .unwrap_err();
-        assert!(matches!(err, LocalizationError::InvalidBox { index: 1, .. }), "{err}");
+        assert!(
+            matches!(err, LocalizationError::InvalidBox { index: 1, .. }),
+            "{err}"
+        );
         assert!(err.to_string().contains("zero or negative area"));
         let outside = BoundingBox::new(700.0, 10.0, 750.0, 50.0).unwrap();
         let err = catalog
             .observe(&cam, &Isometry3::identity(), &[(1, outside)], &mut rng)
             .unwrap_err();
-        assert!(matches!(err, LocalizationError::BoxOutsideImage { .. }), "{err}");
+        assert!(
+            matches!(err, LocalizationError::BoxOutsideImage { .. }),
+            "{err}"
+        );
         let nan_box = BoundingBox {
             x_min: f64::NAN,
             ..ok
         };
-        assert!(catalog
-            .observe(&cam, &Isometry3::identity(), &[(1, nan_box)], &mut rng)
-            .is_err());
+        assert!(
+            catalog
+                .observe(&cam, &Isometry3::identity(), &[(1, nan_box)], &mut rng)
+                .is_err()
+        );
         let mut nan_pose = Isometry3::identity();
         nan_pose.translation.vector.x = f64::NAN;
-        let err = catalog.observe(&cam, &nan_pose, &[(1, ok)], &mut rng).unwrap_err();
-        assert!(matches!(err, LocalizationError::NonFinitePose { .. }), "{err}");
+        let err = catalog
+            .observe(&cam, &nan_pose, &[(1, ok)], &mut rng)
+            .unwrap_err();
+        assert!(
+            matches!(err, LocalizationError::NonFinitePose { .. }),
+            "{err}"
+        );
         assert!(err.to_string().contains("world_from_camera"));
         // Nothing was registered by the failed calls.
         assert!(catalog.targets().is_empty());
@@ -408,7 +437,13 @@ mod tests {
         let mut rng = Xoshiro256PlusPlus::seed_from_u64(3);
         let make = |id, offset: f64| {
             let pts: Vec<_> = (0..100)
-                .map(|i| Point3::new(offset + 0.01 * (i % 10) as f64, 0.01 * (i / 10) as f64, 0.003 * (i % 7) as f64))
+                .map(|i| {
+                    Point3::new(
+                        offset + 0.01 * (i % 10) as f64,
+                        0.01 * (i / 10) as f64,
+                        0.003 * (i % 7) as f64,
+                    )
+                })
                 .collect();
             let mut t = Target::new(id, pts, Isometry3::identity(), None).unwrap();
             t.status = TargetStatus::Converged;

@@ -131,7 +131,11 @@ impl LocalizationConfig {
             );
         }
         if !non_negative(self.uniform_weight) {
-            return bad("uniform_weight", self.uniform_weight, "must be finite and ≥ 0");
+            return bad(
+                "uniform_weight",
+                self.uniform_weight,
+                "must be finite and ≥ 0",
+            );
         }
         if self.gaussian_weight + self.uniform_weight <= 0.0 {
             return bad(

@@ -37,7 +37,9 @@ impl Gaussian3 {
     /// [`LocalizationError::TooFewPoints`] for fewer than 2 points or a non-finite coordinate.
     pub fn from_points(points: &[Point3<f64>]) -> Result<Self, LocalizationError> {
         let n = points.len();
-        let finite = points.iter().all(|p| p.coords.iter().all(|c| c.is_finite()));
+        let finite = points
+            .iter()
+            .all(|p| p.coords.iter().all(|c| c.is_finite()));
         if n < 2 || !finite {
             return Err(LocalizationError::TooFewPoints { count: n });
         }
@@ -105,7 +107,10 @@ impl Gaussian3 {
     /// nats, with `self` = N₀ (the updated fit) and `other` = N₁ (the previous one). +∞ when
     /// either covariance is singular.
     pub fn kl_divergence(&self, other: &Self) -> f64 {
-        let (det0, det1) = (self.covariance.determinant(), other.covariance.determinant());
+        let (det0, det1) = (
+            self.covariance.determinant(),
+            other.covariance.determinant(),
+        );
         let Some(chol1) = other.covariance.cholesky() else {
             return f64::INFINITY;
         };
@@ -138,13 +143,23 @@ mod tests {
 
     #[test]
     fn kl_is_zero_for_identical_sets_and_positive_otherwise() {
-        let a = sample(Vector3::new(1.0, 2.0, 3.0), Vector3::new(0.5, 0.2, 0.1), 2000, 1);
+        let a = sample(
+            Vector3::new(1.0, 2.0, 3.0),
+            Vector3::new(0.5, 0.2, 0.1),
+            2000,
+            1,
+        );
         let ga = Gaussian3::from_points(&a).unwrap();
         assert!(ga.kl_divergence(&ga).abs() < 1e-12);
         let shifted: Vec<_> = a.iter().map(|p| p + Vector3::new(0.05, 0.0, 0.0)).collect();
         let gs = Gaussian3::from_points(&shifted).unwrap();
         assert!(gs.kl_divergence(&ga) > 1e-4);
-        let b = sample(Vector3::new(1.0, 2.0, 3.0), Vector3::new(0.5, 0.2, 0.1), 2000, 2);
+        let b = sample(
+            Vector3::new(1.0, 2.0, 3.0),
+            Vector3::new(0.5, 0.2, 0.1),
+            2000,
+            2,
+        );
         let gb = Gaussian3::from_points(&b).unwrap();
         assert!(gb.kl_divergence(&ga) > 0.0);
         // Closed form for a pure mean shift along x: ½ d²/σ².
@@ -159,7 +174,8 @@ mod tests {
             mean: Point3::origin(),
             covariance: Matrix3::from_diagonal(&Vector3::new(1.0, 4.0, 9.0)),
         };
-        let expected = 0.5 * ((2.0 * std::f64::consts::PI * std::f64::consts::E).powi(3) * 36.0).ln();
+        let expected =
+            0.5 * ((2.0 * std::f64::consts::PI * std::f64::consts::E).powi(3) * 36.0).ln();
         assert!((g.entropy_nats() - expected).abs() < 1e-12);
         // And from samples: within sampling error.
         let pts = sample(Vector3::zeros(), Vector3::new(1.0, 2.0, 3.0), 20000, 5);
@@ -169,7 +185,12 @@ mod tests {
 
     #[test]
     fn ellipsoid_is_right_handed_and_sorted() {
-        let pts = sample(Vector3::new(4.0, 0.0, 1.0), Vector3::new(0.1, 2.0, 0.5), 5000, 3);
+        let pts = sample(
+            Vector3::new(4.0, 0.0, 1.0),
+            Vector3::new(0.1, 2.0, 0.5),
+            5000,
+            3,
+        );
         let e = Gaussian3::from_points(&pts).unwrap().ellipsoid();
         let m = e.world_from_ellipsoid.matrix();
         assert!((m.determinant() - 1.0).abs() < 1e-9);

@@ -37,9 +37,24 @@ mod tests {
     #[test]
     fn angles_wrap() {
         assert!((rotation_between_deg(&yawed(350.0, 0.0), &yawed(10.0, 0.0)) - 20.0).abs() < 1e-9);
-        assert!(!is_keyframe(&yawed(350.0, 0.0), &yawed(10.0, 0.0), 1.5, 30.0));
-        assert!(is_keyframe(&yawed(340.0, 0.0), &yawed(15.0, 0.0), 1.5, 30.0));
-        assert!(is_keyframe(&yawed(-179.0, 0.0), &yawed(150.0, 0.0), 1.5, 30.0));
+        assert!(!is_keyframe(
+            &yawed(350.0, 0.0),
+            &yawed(10.0, 0.0),
+            1.5,
+            30.0
+        ));
+        assert!(is_keyframe(
+            &yawed(340.0, 0.0),
+            &yawed(15.0, 0.0),
+            1.5,
+            30.0
+        ));
+        assert!(is_keyframe(
+            &yawed(-179.0, 0.0),
+            &yawed(150.0, 0.0),
+            1.5,
+            30.0
+        ));
     }
 
     #[test]

@@ -13,7 +13,7 @@
 //! duplicates.
 //!
 //! ```
-//! use nalgebra::{Isometry3, Point3, Vector3};
+//! use nalgebra::Isometry3;
 //! use rand::SeedableRng;
 //! use scarp::detection::BoundingBox;
 //! use scarp::localization::{LocalizationConfig, TargetCatalog};
@@ -32,7 +32,6 @@
 //! assert_eq!(target.points().len(), 2000);
 //! // The fresh cone stretches 3–18 m ahead.
 //! assert!((target.center().z - 10.5).abs() < 0.5);
-//! # let _ = (Point3::<f64>::origin(), Vector3::<f64>::z());
 //! ```
 
 pub mod catalog;

@@ -89,7 +89,15 @@ mod tests {
         let bbox = BoundingBox::new(10.0, 10.0, 50.0, 40.0).unwrap();
         let draw = |seed| {
             let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
-            generate_points(&cam, &Isometry3::identity(), &bbox, 100, 3.0, 18.0, &mut rng)
+            generate_points(
+                &cam,
+                &Isometry3::identity(),
+                &bbox,
+                100,
+                3.0,
+                18.0,
+                &mut rng,
+            )
         };
         assert_eq!(draw(1), draw(1));
         assert_ne!(draw(1), draw(2));

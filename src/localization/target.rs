@@ -223,23 +223,30 @@ mod tests {
         let mut t = Target::new(1, cube(1.0, 0.0), Isometry3::identity(), Some(4)).unwrap();
         assert_eq!(t.status(), TargetStatus::Tracking);
         // Compact but changing: ready, not converged.
-        t.apply_update(cube(0.05, 0.0), Isometry3::identity(), &cfg).unwrap();
+        t.apply_update(cube(0.05, 0.0), Isometry3::identity(), &cfg)
+            .unwrap();
         assert_eq!(t.status(), TargetStatus::ReadyForFineLocalization);
-        t.apply_update(cube(0.05, 0.0), Isometry3::identity(), &cfg).unwrap();
-        t.apply_update(cube(0.05, 0.0), Isometry3::identity(), &cfg).unwrap();
+        t.apply_update(cube(0.05, 0.0), Isometry3::identity(), &cfg)
+            .unwrap();
+        t.apply_update(cube(0.05, 0.0), Isometry3::identity(), &cfg)
+            .unwrap();
         assert_eq!(t.status(), TargetStatus::ReadyForFineLocalization);
         // A jump resets the streak.
-        t.apply_update(cube(0.05, 1.0), Isometry3::identity(), &cfg).unwrap();
+        t.apply_update(cube(0.05, 1.0), Isometry3::identity(), &cfg)
+            .unwrap();
         assert!(t.last_kl_nats().unwrap() > 1.0);
         for _ in 0..2 {
-            t.apply_update(cube(0.05, 1.0), Isometry3::identity(), &cfg).unwrap();
+            t.apply_update(cube(0.05, 1.0), Isometry3::identity(), &cfg)
+                .unwrap();
             assert_eq!(t.status(), TargetStatus::ReadyForFineLocalization);
         }
-        t.apply_update(cube(0.05, 1.0), Isometry3::identity(), &cfg).unwrap();
+        t.apply_update(cube(0.05, 1.0), Isometry3::identity(), &cfg)
+            .unwrap();
         assert_eq!(t.status(), TargetStatus::Converged);
         assert_eq!(t.updates(), 7);
         // Converged sticks.
-        t.apply_update(cube(1.0, 0.0), Isometry3::identity(), &cfg).unwrap();
+        t.apply_update(cube(1.0, 0.0), Isometry3::identity(), &cfg)
+            .unwrap();
         assert_eq!(t.status(), TargetStatus::Converged);
     }
 }

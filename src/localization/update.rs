@@ -31,8 +31,7 @@ impl BoxLikelihood {
         let sy = 0.5 * self.bbox.height();
         let dx = (pixel.x - cx) / sx;
         let dy = (pixel.y - cy) / sy;
-        let gaussian =
-            (-0.5 * (dx * dx + dy * dy)).exp() / (2.0 * std::f64::consts::PI * sx * sy);
+        let gaussian = (-0.5 * (dx * dx + dy * dy)).exp() / (2.0 * std::f64::consts::PI * sx * sy);
         let e = &self.enlarged;
         let inside =
             pixel.x >= e.x_min && pixel.x <= e.x_max && pixel.y >= e.y_min && pixel.y <= e.y_max;
@@ -176,6 +175,8 @@ mod tests {
             uniform_weight: 1.0,
         };
         let mut rng = Xoshiro256PlusPlus::seed_from_u64(1);
-        assert!(update_points(&points, &cam, &Isometry3::identity(), &l_off, 0.1, &mut rng).is_none());
+        assert!(
+            update_points(&points, &cam, &Isometry3::identity(), &l_off, 0.1, &mut rng).is_none()
+        );
     }
 }

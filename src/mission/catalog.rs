@@ -30,6 +30,8 @@ pub enum TargetStatus {
     Unconverged,
     /// The planner could not reach it safely.
     Unreachable,
+    /// A second registration of a rock the mission already mapped (or gave up on).
+    Duplicate,
 }
 
 impl TargetStatus {
@@ -44,6 +46,7 @@ impl TargetStatus {
             Self::Incomplete => "incomplete",
             Self::Unconverged => "unconverged",
             Self::Unreachable => "unreachable",
+            Self::Duplicate => "duplicate",
         }
     }
 }
@@ -96,13 +99,19 @@ impl MissionTarget {
 /// The catalog: mission targets by localization id.
 pub type Catalog = BTreeMap<u32, MissionTarget>;
 
-/// Whether `center` lies within an already handled target's footprint (its cylinder radius, at
-/// least `min_distance_m`): a re-registration of a rock the mission is done with.
-pub fn is_already_handled(catalog: &Catalog, center: &Point3<f64>, min_distance_m: f64) -> bool {
-    catalog.values().any(|m| {
-        m.status != TargetStatus::Localizing
-            && (Point3::from(m.report.center) - center).norm()
-                < m.report.cylinder_radius_m.max(min_distance_m)
+/// Whether `center` lies horizontally within `radius_m` of a target the mission has finished
+/// with or is working on (any status but `localizing` and `duplicate`), other than `except`:
+/// a re-registration of a rock already handled.
+pub fn is_already_handled(
+    catalog: &Catalog,
+    center: &Point3<f64>,
+    radius_m: f64,
+    except: Option<u32>,
+) -> bool {
+    catalog.iter().any(|(id, m)| {
+        Some(*id) != except
+            && !matches!(m.status, TargetStatus::Localizing | TargetStatus::Duplicate)
+            && (m.report.center[0] - center.x).hypot(m.report.center[1] - center.y) < radius_m
     })
 }
 

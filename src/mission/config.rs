@@ -23,6 +23,10 @@ pub struct MissionConfig {
     /// A vehicle closer than this to terrain or a rock counts as a collision, metres.
     /// Default 0.3 (the airframe's radius).
     pub collision_radius_m: f64,
+    /// A target whose centre lies horizontally within this of a rock the mission already
+    /// handled is a duplicate and is skipped, metres. Default 2 (localization error plus a
+    /// rock's radius).
+    pub duplicate_radius_m: f64,
     /// Target detectors (the mission flies the simulated one).
     pub detection: DetectionConfig,
     /// The target cylinder from the converged point set.
@@ -54,6 +58,7 @@ impl Default for MissionConfig {
             map_camera_rate_hz: 20.0,
             max_sim_time_s: 7200.0,
             collision_radius_m: 0.3,
+            duplicate_radius_m: 2.0,
             detection: DetectionConfig::default(),
             cylinder: CylinderEstimateConfig::default(),
             coverage: CoverageConfig::default(),
@@ -96,6 +101,7 @@ impl MissionConfig {
             ("map_camera_rate_hz", self.map_camera_rate_hz),
             ("max_sim_time_s", self.max_sim_time_s),
             ("collision_radius_m", self.collision_radius_m),
+            ("duplicate_radius_m", self.duplicate_radius_m),
             ("cylinder.min_radius_m", self.cylinder.min_radius_m),
             ("mapping.voxel_size_m", self.mapping.voxel_size_m),
             ("mapping.max_depth_m", self.mapping.max_depth_m),
@@ -182,7 +188,8 @@ pub struct MappingConfig {
     pub voxel_size_m: f64,
     /// Depth beyond this is not fused, metres. Default 5.
     pub max_depth_m: f64,
-    /// The region of interest is the target's cylinder grown by this, metres. Default 0.4.
+    /// The region of interest is the target's cylinder grown by this, metres. Default 1.0:
+    /// the localization error (up to about 1 m) must not cut the rock off.
     pub roi_margin_m: f64,
     /// Drop mesh components smaller than this many triangles. Default 500.
     pub min_component_triangles: usize,
@@ -200,7 +207,7 @@ impl Default for MappingConfig {
         Self {
             voxel_size_m: 0.01,
             max_depth_m: 5.0,
-            roi_margin_m: 0.4,
+            roi_margin_m: 1.0,
             min_component_triangles: 500,
             refine: scarp_slam::mapping::RefineConfig::default(),
             odometry: scarp_slam::odometry::OdometryConfig::default(),

@@ -290,6 +290,9 @@ impl<'a> Mission<'a> {
                         self.targets.remove(&id);
                         self.resume_search(timings)?;
                     }
+                    Some(state) if self.mark_if_duplicate(id, &state.center) => {
+                        self.resume_search(timings)?;
+                    }
                     Some(state) if state.converged => self.start_mapping(id, timings)?,
                     Some(_) if self.motion.trajectory_done() => {
                         self.set_status(id, TargetStatus::Unconverged);
@@ -347,7 +350,12 @@ impl<'a> Mission<'a> {
                 continue;
             }
             // A re-registration of a target already handled (its filter was reset) is skipped.
-            if is_already_handled(&self.targets, &state.center, 1.0) {
+            if is_already_handled(
+                &self.targets,
+                &state.center,
+                self.inputs.config.duplicate_radius_m,
+                None,
+            ) {
                 continue;
             }
             tracing::info!(
@@ -393,17 +401,39 @@ impl<'a> Mission<'a> {
         }
     }
 
-    /// The lowest-id target ready for fine localization (or already converged).
-    fn next_target_to_localize(&self) -> Option<u32> {
-        self.targets
+    /// The lowest-id target ready for fine localization (or already converged). Targets that
+    /// have drifted onto a rock already handled are marked duplicates on the way.
+    fn next_target_to_localize(&mut self) -> Option<u32> {
+        let candidates: Vec<u32> = self
+            .targets
             .iter()
             .filter(|(_, m)| m.status == TargetStatus::Localizing)
-            .find(|(id, _)| {
-                self.perception
-                    .target_state(**id)
-                    .is_some_and(|s| s.ready_for_fine_localization || s.converged)
-            })
             .map(|(id, _)| *id)
+            .collect();
+        for id in candidates {
+            let Some(state) = self.perception.target_state(id) else {
+                continue;
+            };
+            if self.mark_if_duplicate(id, &state.center) {
+                continue;
+            }
+            if state.ready_for_fine_localization || state.converged {
+                return Some(id);
+            }
+        }
+        None
+    }
+
+    /// Marks target `id` a duplicate when `center` lies on a rock already handled.
+    fn mark_if_duplicate(&mut self, id: u32, center: &Point3<f64>) -> bool {
+        let radius = self.inputs.config.duplicate_radius_m;
+        if is_already_handled(&self.targets, center, radius, Some(id)) {
+            tracing::info!("target {id} is a duplicate of a rock already handled");
+            self.set_status(id, TargetStatus::Duplicate);
+            true
+        } else {
+            false
+        }
     }
 
     fn start_fine_localization(&mut self, id: u32, timings: &mut StageTimings) -> anyhow::Result<()> {
@@ -471,6 +501,9 @@ impl<'a> Mission<'a> {
         let Some(state) = self.perception.target_state(id) else {
             return self.resume_search(timings);
         };
+        if self.mark_if_duplicate(id, &state.center) {
+            return self.resume_search(timings);
+        }
         let clock = Instant::now();
         let cylinder = self.target_cylinder(&state.points, &state.center)?;
         let config = &self.inputs.config;
