@@ -1,7 +1,9 @@
 //! Perception during Search and FineLocalize: detect → track → localize, at the estimated pose.
 //!
-//! Only confirmed tracks feed the depth filter, so a sporadic false positive (a one-frame
-//! detection) never seeds a target; the filter's own hit and miss counters remove what gets
+//! Only confirmed tracks that a detection updated in this frame feed the depth filter: a
+//! sporadic false positive (a one-frame detection) never seeds a target, and KLT-only
+//! predictions between detections do not drag the points (on sparse search frames they made
+//! the filter converge off the rock). The filter's own hit and miss counters remove what gets
 //! through.
 
 use std::time::Instant;
@@ -36,6 +38,38 @@ pub struct TargetState {
     pub converged: bool,
     /// Horizontal covariance `[σxx, σxy, σyy]`, m².
     pub covariance_xy: [f64; 3],
+}
+
+/// Median measured depth over the central half of a box (sampled on a grid), metres; `None`
+/// when no pixel there has a measurement.
+///
+/// Boxes whose rock lies beyond the depth filter's range are held back: Algorithm 2 draws
+/// depths in [3, 18] m, so a rock first seen at 25 m would seed a point set that cannot reach
+/// it, and the filter would converge in mid-air. The rock comes into range as the search goes
+/// on.
+pub fn median_depth_in_box(depth_m: &scarp_slam::image::DepthImage, bbox: &BoundingBox) -> Option<f64> {
+    let (cx, cy) = bbox.center();
+    let (hw, hh) = (0.25 * bbox.width(), 0.25 * bbox.height());
+    let mut samples = Vec::with_capacity(81);
+    for j in 0..9 {
+        for i in 0..9 {
+            let u = cx - hw + 2.0 * hw * f64::from(i) / 8.0;
+            let v = cy - hh + 2.0 * hh * f64::from(j) / 8.0;
+            if u < 0.0 || v < 0.0 {
+                continue;
+            }
+            if let Some(&d) = depth_m.get(u.round() as u32, v.round() as u32)
+                && d > 0.0
+            {
+                samples.push(f64::from(d));
+            }
+        }
+    }
+    if samples.is_empty() {
+        return None;
+    }
+    samples.sort_by(f64::total_cmp);
+    Some(samples[samples.len() / 2])
 }
 
 /// Wall time of each perception stage for one frame, seconds.
@@ -92,14 +126,28 @@ impl Perception {
         let tracks = self.tracker.step(&gray_from_rgb(&frame.rgb), &detections)?;
         let track_s = clock.elapsed().as_secs_f64();
         let clock = Instant::now();
+        let max_depth_m = self.config.localization.max_depth_m;
         let boxes: Vec<(u64, BoundingBox)> = tracks
             .iter()
-            .filter(|t| t.confirmed && t.bbox.is_inside_image(camera.width, camera.height, 0.0))
+            .filter(|t| t.confirmed && t.updated)
+            .filter(|t| t.bbox.is_inside_image(camera.width, camera.height, 0.0))
+            .filter(|t| {
+                median_depth_in_box(&frame.depth_m, &t.bbox).is_some_and(|d| d <= max_depth_m)
+            })
             .filter(|t| BoundingBox::new(t.bbox.x_min, t.bbox.y_min, t.bbox.x_max, t.bbox.y_max).is_ok())
             .map(|t| (t.id, t.bbox))
             .collect();
-        self.catalog
+        let observed = self
+            .catalog
             .observe(camera, world_from_camera, &boxes, &mut self.rng)?;
+        tracing::debug!(
+            "t = {:.2} s: {} detections, {} tracks, {} boxes to the filter; {:?}",
+            frame.timestamp_s,
+            detections.len(),
+            tracks.len(),
+            boxes.len(),
+            observed
+        );
         Ok(StageTimes {
             detect_s,
             track_s,
@@ -142,5 +190,27 @@ impl Perception {
     /// One target, if it still exists.
     pub fn target_state(&self, id: u32) -> Option<TargetState> {
         self.catalog.target(id).map(Self::state_of)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use scarp_slam::image::DepthImage;
+
+    #[test]
+    fn median_depth_reads_the_box_centre() {
+        let mut depth = DepthImage::filled(100, 80, 0.0);
+        for v in 20..60 {
+            for u in 30..70 {
+                if let Some(d) = depth.get_mut(u, v) {
+                    *d = 12.0;
+                }
+            }
+        }
+        let inside = BoundingBox::new(30.0, 20.0, 70.0, 60.0).unwrap();
+        assert_eq!(median_depth_in_box(&depth, &inside), Some(12.0));
+        let empty = BoundingBox::new(0.0, 0.0, 20.0, 15.0).unwrap();
+        assert_eq!(median_depth_in_box(&depth, &empty), None);
     }
 }
