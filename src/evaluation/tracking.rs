@@ -8,6 +8,9 @@
 //! - a track without a true target box is a false positive, unless it overlaps an ignored box
 //!   at `match_iou` (see below);
 //! - a true target whose matched track id differs from the id it last matched is an ID switch.
+//!   The memory of the last id is cleared when the target leaves the scored area (no scored
+//!   box in a frame): the tracker deregisters boxes that leave the image, by design (paper
+//!   §II), so a target that comes back in a later pass gets a new id without a switch.
 //!
 //! `MOTA = 1 − (misses + false positives + ID switches) / true target boxes`.
 //!
@@ -140,6 +143,14 @@ pub fn evaluate_tracking(
     let mut targets_tracked: BTreeSet<u32> = BTreeSet::new();
 
     for frame in frames {
+        // Forget the ids of targets that left the scored area.
+        let present: BTreeSet<u32> = frame
+            .truth
+            .iter()
+            .filter(|g| g.is_target && !ignored(&g.bbox, width, height, config))
+            .map(|g| g.id)
+            .collect();
+        last_match.retain(|id, _| present.contains(id));
         for t in &frame.tracks {
             let e = lifetimes
                 .entry(t.id)
@@ -325,15 +336,18 @@ mod tests {
                 &[(2, 56.0, 60.0), (5, 1.0, 100.0)],
                 &[(3, true, 56.0, 60.0), (7, true, 1.0, 100.0)],
             ),
+            // Target 3 leaves the image, then comes back under a new id: no switch.
+            frame(0.20, &[], &[]),
+            frame(0.25, &[(6, 58.0, 60.0)], &[(3, true, 58.0, 60.0)]),
         ];
         let s = evaluate_tracking(&frames, 320, 240, &TrackingEvalConfig::default());
-        assert_eq!(s.truth_boxes, 4);
-        assert_eq!((s.matches, s.misses, s.id_switches), (3, 1, 1));
+        assert_eq!(s.truth_boxes, 5);
+        assert_eq!((s.matches, s.misses, s.id_switches), (4, 1, 1));
         assert_eq!(s.false_positives, 2);
-        assert!((s.mota - (1.0 - 4.0 / 4.0)).abs() < 1e-12);
+        assert!((s.mota - (1.0 - 4.0 / 5.0)).abs() < 1e-12);
         assert_eq!(s.false_tracks, 1);
         assert!((s.false_track_max_lifetime_s - 0.05).abs() < 1e-12);
-        assert_eq!(s.tracks, 4);
+        assert_eq!(s.tracks, 5);
     }
 
     #[test]

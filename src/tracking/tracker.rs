@@ -33,9 +33,14 @@ use crate::detection::{BoundingBox, Detection};
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct TrackerConfig {
-    /// Minimum IoU between a track's predicted box and a detection to associate them, and the
-    /// IoU below which a detection starts a new track. Default 0.3 (paper).
+    /// Minimum IoU between a track's predicted box and a detection to associate them. Default
+    /// 0.3 (paper).
     pub iou_threshold: f64,
+    /// An unassociated detection starts a new track only if its IoU with every track is below
+    /// this. Default 0.3 (the paper uses the association threshold). Lower it (for example to
+    /// 0.05) for small boxes under large detector jitter, where two detections of one object
+    /// often overlap less than 0.3 and would otherwise start duplicate tracks.
+    pub register_iou_threshold: f64,
     /// Prediction noise `r` of `R = diag(r, r, 0, r, r, 0)`, px². Default 10 (paper).
     pub prediction_variance_px2: f64,
     /// Detection noise `q` of `Q = q·I₄`, px²; also the initial variance of a new track.
@@ -73,6 +78,7 @@ impl Default for TrackerConfig {
     fn default() -> Self {
         Self {
             iou_threshold: 0.3,
+            register_iou_threshold: 0.3,
             prediction_variance_px2: 10.0,
             detection_variance_px2: 0.2,
             max_entropy: 16.0,
@@ -111,6 +117,9 @@ impl TrackerConfig {
         }
         if !(self.detection_variance_px2.is_finite() && self.detection_variance_px2 > 0.0) {
             return bad("detection_variance_px2", "must be finite and > 0");
+        }
+        if !(self.register_iou_threshold > 0.0 && self.register_iou_threshold <= 1.0) {
+            return bad("register_iou_threshold", "must be in (0, 1]");
         }
         if !self.max_entropy.is_finite() {
             return bad("max_entropy", "must be finite");
@@ -318,7 +327,7 @@ impl Tracker {
             let overlaps = self
                 .tracks
                 .iter()
-                .any(|t| t.bbox().iou(&d.bbox) >= self.config.iou_threshold);
+                .any(|t| t.bbox().iou(&d.bbox) >= self.config.register_iou_threshold);
             if overlaps {
                 continue;
             }
