@@ -5,8 +5,8 @@
 //! 1. predicts every track with the similarity transform of its box, fitted robustly to the
 //!    pyramidal-LK motion of Harris corners found inside the box in the previous frame
 //!    (identity when too few corners track; see [`TrackerConfig::min_tracked_points`]);
-//! 2. drops tracks whose box left the image (with a margin) or whose box entropy reached the
-//!    threshold (no update for a while);
+//! 2. drops tracks whose box left the image (with a margin), collapsed below a minimum size,
+//!    or whose box entropy reached the threshold (no update for a while);
 //! 3. associates detections to tracks greedily by decreasing IoU, at IoU ≥ the threshold, and
 //!    updates the matched tracks;
 //! 4. registers each remaining detection that overlaps no track at the threshold as a new,
@@ -52,6 +52,9 @@ pub struct TrackerConfig {
     /// Drop a track whose predicted box comes closer than this to the image border, and do
     /// not start tracks from such detections, px. Default 5 (paper).
     pub border_margin_px: f64,
+    /// Drop a track whose box becomes narrower or shorter than this, px (a collapsed box no
+    /// longer covers an object). Default 4.
+    pub min_box_px: f64,
     /// Detections scoring below this are ignored. Default 0 (keep all).
     pub min_detection_score: f32,
     /// Detections needed to confirm a new track. Default 3.
@@ -83,6 +86,7 @@ impl Default for TrackerConfig {
             detection_variance_px2: 0.2,
             max_entropy: 16.0,
             border_margin_px: 5.0,
+            min_box_px: 4.0,
             min_detection_score: 0.0,
             confirm_hits: 3,
             confirm_window_frames: 5,
@@ -126,6 +130,9 @@ impl TrackerConfig {
         }
         if !(self.border_margin_px.is_finite() && self.border_margin_px >= 0.0) {
             return bad("border_margin_px", "must be finite and ≥ 0");
+        }
+        if !(self.min_box_px.is_finite() && self.min_box_px >= 0.0) {
+            return bad("min_box_px", "must be finite and ≥ 0");
         }
         if !self.min_detection_score.is_finite() {
             return bad("min_detection_score", "must be finite");
@@ -290,10 +297,11 @@ impl Tracker {
         // 2. Drop tracks that left the image or grew too uncertain.
         let margin = self.config.border_margin_px;
         let max_entropy = self.config.max_entropy;
+        let min_size = self.config.min_box_px.max(f64::MIN_POSITIVE);
         self.tracks.retain(|t| {
             let b = t.bbox();
-            b.width() > 0.0
-                && b.height() > 0.0
+            b.width() >= min_size
+                && b.height() >= min_size
                 && b.is_inside_image(width, height, margin)
                 && box_entropy(&t.estimate.covariance_px2) < max_entropy
         });
