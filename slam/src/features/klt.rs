@@ -66,7 +66,7 @@ impl KltConfig {
     /// [`FeatureError::InvalidConfig`] naming the field.
     pub fn validate(&self) -> Result<(), FeatureError> {
         let bad = |field, reason| Err(FeatureError::InvalidConfig { field, reason });
-        if self.window_px < 3 || self.window_px % 2 == 0 || self.window_px > 101 {
+        if self.window_px < 3 || self.window_px.is_multiple_of(2) || self.window_px > 101 {
             return bad("window_px", "must be odd and in 3..=101");
         }
         if self.max_iterations == 0 {
@@ -305,7 +305,7 @@ fn track_one(
         residual: f32::INFINITY,
         forward_backward_px: f32::NAN,
     };
-    if !(p0.x.is_finite() && p0.y.is_finite()) || !inside(&prev.levels[0], p0) {
+    if !(p0.x.is_finite() && p0.y.is_finite() && inside(&prev.levels[0], p0)) {
         return failed(KltStatus::OutOfImage);
     }
     let half = (config.window_px / 2) as i32;
