@@ -59,33 +59,41 @@ fn bench(c: &mut Criterion) {
     let frames: Vec<GrayImage> = (0..5)
         .map(|k| frame(3.0 * k as f32, 1.5 * k as f32))
         .collect();
-    let mut warm = Tracker::new(TrackerConfig::default()).expect("default config");
-    for (k, f) in frames.iter().take(4).enumerate() {
-        warm.step(f, &detections(k as u32)).expect("step");
-    }
-    assert_eq!(warm.tracks().iter().filter(|t| t.confirmed).count(), 8);
     let next = &frames[4];
     let dets = detections(4);
-    c.bench_function("tracker_step_8_targets_640x480", |b| {
-        b.iter_batched(
-            || warm.clone(),
-            |mut tracker| tracker.step(next, &dets).expect("step"),
-            BatchSize::LargeInput,
-        )
-    });
-    let mut refined_config = TrackerConfig::default();
-    refined_config.motion.refinement_passes = 1;
-    let mut refined = Tracker::new(refined_config).expect("config");
-    for (k, f) in frames.iter().take(4).enumerate() {
-        refined.step(f, &detections(k as u32)).expect("step");
+    let lawnmower: TrackerConfig = {
+        let mut c = TrackerConfig::default();
+        c.motion.klt.window_px = 15;
+        c
+    };
+    let variants: Vec<(&str, TrackerConfig)> = vec![
+        ("default", TrackerConfig::default()),
+        ("window_15", lawnmower),
+        ("no_forward_backward", {
+            let mut c = TrackerConfig::default();
+            c.motion.klt.max_forward_backward_px = None;
+            c
+        }),
+        ("refined", {
+            let mut c = TrackerConfig::default();
+            c.motion.refinement_passes = 1;
+            c
+        }),
+    ];
+    for (name, config) in variants {
+        let mut warm = Tracker::new(config).expect("valid config");
+        for (k, f) in frames.iter().take(4).enumerate() {
+            warm.step(f, &detections(k as u32)).expect("step");
+        }
+        assert_eq!(warm.tracks().iter().filter(|t| t.confirmed).count(), 8);
+        c.bench_function(&format!("tracker_step_8_targets_640x480_{name}"), |b| {
+            b.iter_batched(
+                || warm.clone(),
+                |mut tracker| tracker.step(next, &dets).expect("step"),
+                BatchSize::LargeInput,
+            )
+        });
     }
-    c.bench_function("tracker_step_8_targets_640x480_refined", |b| {
-        b.iter_batched(
-            || refined.clone(),
-            |mut tracker| tracker.step(next, &dets).expect("step"),
-            BatchSize::LargeInput,
-        )
-    });
 }
 
 criterion_group! {
