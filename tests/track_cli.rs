@@ -1,7 +1,8 @@
 //! End-to-end test of `scarp track` (issue 6), kept small: a 3 s, 60-frame pass at 20 Hz that
 //! flies toward target 1 of the default world at about 14 m height, pitched about 55° down (the
 //! survey camera), rendered with noise, detected by the simulated detector (σ 4 px, 10% misses,
-//! false positives on distractors and random texture) and tracked.
+//! false positives on distractors and random texture) and tracked with the lawn-mower config
+//! (`configs/track_lawnmower.toml`).
 //!
 //! The full lawn-mower figure of the issue is measured by hand (see `src/cli/track.rs`).
 
@@ -88,6 +89,8 @@ fn track_follows_a_target_on_a_survey_pass_and_scores_it() {
         path_str(&seq),
         "--detector",
         "simulated",
+        "--config",
+        concat!(env!("CARGO_MANIFEST_DIR"), "/configs/track_lawnmower.toml"),
         "--out",
         path_str(&out_dir),
         "--json",
