@@ -20,6 +20,18 @@ pub struct AllDefaults {
     pub fragility: crate::fragility::FragilityConfig,
     /// Target detectors.
     pub detection: DetectionDefaults,
+    /// Bounding-box tracking and its scoring.
+    pub tracking: TrackingDefaults,
+}
+
+/// The tracker's tunables (the `[tracker]` table of `scarp track --config`) and the scoring's
+/// (`[evaluation]`).
+#[derive(Debug, Default, Serialize)]
+pub struct TrackingDefaults {
+    /// The box tracker (paper defaults).
+    pub tracker: crate::tracking::TrackerConfig,
+    /// Scoring against ground-truth boxes.
+    pub evaluation: crate::evaluation::tracking::TrackingEvalConfig,
 }
 
 /// The detectors' tunables.
@@ -59,7 +71,14 @@ mod tests {
     fn defaults_print_and_parse_back() {
         let text = defaults_toml().unwrap();
         let value: toml::Table = toml::from_str(&text).unwrap();
-        for section in ["sensor", "estimator", "planning", "fragility", "detection"] {
+        for section in [
+            "sensor",
+            "estimator",
+            "planning",
+            "fragility",
+            "detection",
+            "tracking",
+        ] {
             assert!(value.contains_key(section), "{section}");
         }
         let sensor: scarp_datasets::sensor::SensorConfig =
@@ -72,5 +91,8 @@ mod tests {
             simulated,
             crate::detection::SimulatedDetectorConfig::default()
         );
+        let tracker: crate::tracking::TrackerConfig =
+            value["tracking"]["tracker"].clone().try_into().unwrap();
+        assert_eq!(tracker, crate::tracking::TrackerConfig::default());
     }
 }
