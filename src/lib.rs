@@ -4,6 +4,12 @@
 //! state machine, fragility analysis, evaluation metrics and the `scarp` command-line tool.
 //! Geometry and mapping live in [`scarp_slam`], motion in [`scarp_planning`], file formats in
 //! [`scarp_export`] and synthetic worlds in [`scarp_datasets`].
+//!
+//! ## Cargo features
+//!
+//! - `onnx` (off by default): `detection::OnnxDetector`, which runs YOLO v5/v8 ONNX exports
+//!   with `tract-onnx` (pure Rust, nothing downloaded at run time). Off by default because it
+//!   lengthens a clean build; CI builds and tests it.
 
 pub mod cli;
 pub mod detection;

@@ -9,10 +9,14 @@
 
 pub mod letterbox;
 pub mod nms;
+#[cfg(feature = "onnx")]
+pub mod onnx;
 pub mod simulated;
 pub mod yolo;
 
 pub use nms::non_max_suppression;
+#[cfg(feature = "onnx")]
+pub use onnx::OnnxDetector;
 pub use simulated::{SimulatedDetector, SimulatedDetectorConfig};
 pub use yolo::{OnnxDetectorConfig, YoloLayout};
 

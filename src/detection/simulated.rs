@@ -743,4 +743,44 @@ mod tests {
         assert_eq!(back, SimulatedDetectorConfig::default());
         assert!(toml::from_str::<SimulatedDetectorConfig>("sigma = 3").is_err());
     }
+
+    #[test]
+    fn noiseless_model_reproduces_the_rendered_target_boxes() {
+        use scarp_datasets::paths::default_orbit;
+        use scarp_datasets::render::Renderer;
+        use scarp_datasets::sequence::boxes_from_mask;
+        use scarp_slam::PinholeCamera;
+
+        let world = World::builtin_default().unwrap();
+        let camera = PinholeCamera::from_hfov(320, 240, 80.0).unwrap();
+        let pose = default_orbit(&world, 4).unwrap()[0].world_from_camera;
+        let out = Renderer::new(&world).render(&camera, &pose).unwrap();
+        let exact = SimulatedDetectorConfig {
+            jitter_sigma_px: 0.0,
+            miss_rate: 0.0,
+            max_truncation_fraction: 1.0,
+            min_fill_fraction: 0.0,
+            min_visible_px: 1,
+            ..quiet()
+        };
+        let det = SimulatedDetector::for_world(exact, &world).unwrap();
+        let mut got: Vec<[f64; 4]> = det
+            .detect_mask(&out.instance, 0.0)
+            .iter()
+            .map(|d| [d.bbox.x_min, d.bbox.y_min, d.bbox.x_max, d.bbox.y_max])
+            .collect();
+        let mut truth: Vec<[f64; 4]> =
+            boxes_from_mask(&out.instance, 0.0, |id| world.rock(id).map(|r| r.role))
+                .into_iter()
+                .filter(|b| b.role == RockRole::Target)
+                .map(|b| {
+                    let b = BoundingBox::from_inclusive_pixels(b.bbox_px);
+                    [b.x_min, b.y_min, b.x_max, b.y_max]
+                })
+                .collect();
+        assert!(!truth.is_empty(), "the orbit looks at a target");
+        got.sort_by(|a, b| a[0].total_cmp(&b[0]));
+        truth.sort_by(|a, b| a[0].total_cmp(&b[0]));
+        assert_eq!(got, truth);
+    }
 }
