@@ -25,7 +25,9 @@ use scarp_slam::image::gray_from_rgb;
 use serde::{Deserialize, Serialize};
 
 use crate::detection::simulated::roles_from_boxes;
-use crate::detection::{BoundingBox, Detector, SimulatedDetector, SimulatedDetectorConfig};
+use crate::detection::{
+    BoundingBox, Detector, OnnxDetectorConfig, SimulatedDetector, SimulatedDetectorConfig,
+};
 use crate::evaluation::tracking::{
     EvalFrame, TrackObservation, TrackingEvalConfig, TrackingScores, TruthBox, evaluate_tracking,
 };
@@ -44,8 +46,8 @@ pub struct TrackArgs {
     /// Output directory.
     #[arg(long)]
     pub out: PathBuf,
-    /// A TOML file with `[tracker]`, `[simulated_detector]` and `[evaluation]` tables; missing
-    /// keys keep their defaults.
+    /// A TOML file with `[tracker]`, `[simulated_detector]`, `[onnx_detector]` and
+    /// `[evaluation]` tables; missing keys keep their defaults.
     #[arg(long)]
     pub config: Option<PathBuf>,
     /// Seed of the simulated detector (overrides the config file's).
@@ -67,6 +69,8 @@ pub struct TrackConfig {
     pub tracker: TrackerConfig,
     /// The simulated detector.
     pub simulated_detector: SimulatedDetectorConfig,
+    /// The ONNX YOLO detector (`--detector onnx:MODEL`, cargo feature `onnx`).
+    pub onnx_detector: OnnxDetectorConfig,
     /// Scoring against `boxes.txt`.
     pub evaluation: TrackingEvalConfig,
 }
@@ -122,12 +126,27 @@ fn make_detector(
         return Ok(Box::new(detector));
     }
     if let Some(model) = name.strip_prefix("onnx:") {
-        bail!(
-            "--detector onnx:{model}: the ONNX detector is not available in this build \
-             (it needs the `onnx` cargo feature and the OnnxDetector of the detection module)"
-        );
+        return onnx_detector(Path::new(model), config);
     }
     bail!("--detector must be `simulated` or `onnx:MODEL`, got `{name}`")
+}
+
+/// The YOLO ONNX detector of `model`.
+#[cfg(feature = "onnx")]
+fn onnx_detector(model: &Path, config: &TrackConfig) -> anyhow::Result<Box<dyn Detector>> {
+    let detector = crate::detection::OnnxDetector::load(model, config.onnx_detector.clone())
+        .with_context(|| format!("loading ONNX model {}", model.display()))?;
+    Ok(Box::new(detector))
+}
+
+/// Without the `onnx` feature: a clear error.
+#[cfg(not(feature = "onnx"))]
+fn onnx_detector(model: &Path, _config: &TrackConfig) -> anyhow::Result<Box<dyn Detector>> {
+    bail!(
+        "--detector onnx:{}: this scarp was built without the `onnx` cargo feature \
+         (rebuild with `--features onnx`)",
+        model.display()
+    )
 }
 
 /// Groups `boxes.txt` by frame time: the boxes whose timestamp is within 1 ms of `t`.
