@@ -41,6 +41,7 @@ mod tests {
             "fragility",
             "detection",
             "localization",
+            "tracker",
         ] {
             assert!(value.contains_key(section), "{section}");
         }
@@ -60,5 +61,8 @@ mod tests {
             localization,
             crate::localization::LocalizationConfig::default()
         );
+        let tracker: crate::tracking::TrackerConfig =
+            value["tracker"].clone().try_into().unwrap();
+        assert_eq!(tracker, crate::tracking::TrackerConfig::default());
     }
 }

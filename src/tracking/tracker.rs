@@ -5,8 +5,8 @@
 //! 1. predicts every track with the similarity transform of its box, fitted robustly to the
 //!    pyramidal-LK motion of Harris corners found inside the box in the previous frame
 //!    (identity when too few corners track; see [`TrackerConfig::min_tracked_points`]);
-//! 2. drops tracks whose box left the image (with a margin) or whose box entropy reached the
-//!    threshold (no update for a while);
+//! 2. drops tracks whose box left the image (with a margin), collapsed below a minimum size,
+//!    or whose box entropy reached the threshold (no update for a while);
 //! 3. associates detections to tracks greedily by decreasing IoU, at IoU ≥ the threshold, and
 //!    updates the matched tracks;
 //! 4. registers each remaining detection that overlaps no track at the threshold as a new,
@@ -33,9 +33,14 @@ use crate::detection::{BoundingBox, Detection};
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct TrackerConfig {
-    /// Minimum IoU between a track's predicted box and a detection to associate them, and the
-    /// IoU below which a detection starts a new track. Default 0.3 (paper).
+    /// Minimum IoU between a track's predicted box and a detection to associate them. Default
+    /// 0.3 (paper).
     pub iou_threshold: f64,
+    /// An unassociated detection starts a new track only if its IoU with every track is below
+    /// this. Default 0.3 (the paper uses the association threshold). Lower it (for example to
+    /// 0.05) for small boxes under large detector jitter, where two detections of one object
+    /// often overlap less than 0.3 and would otherwise start duplicate tracks.
+    pub register_iou_threshold: f64,
     /// Prediction noise `r` of `R = diag(r, r, 0, r, r, 0)`, px². Default 10 (paper).
     pub prediction_variance_px2: f64,
     /// Detection noise `q` of `Q = q·I₄`, px²; also the initial variance of a new track.
@@ -47,6 +52,9 @@ pub struct TrackerConfig {
     /// Drop a track whose predicted box comes closer than this to the image border, and do
     /// not start tracks from such detections, px. Default 5 (paper).
     pub border_margin_px: f64,
+    /// Drop a track whose box becomes narrower or shorter than this, px (a collapsed box no
+    /// longer covers an object). Default 4.
+    pub min_box_px: f64,
     /// Detections scoring below this are ignored. Default 0 (keep all).
     pub min_detection_score: f32,
     /// Detections needed to confirm a new track. Default 3.
@@ -73,10 +81,12 @@ impl Default for TrackerConfig {
     fn default() -> Self {
         Self {
             iou_threshold: 0.3,
+            register_iou_threshold: 0.3,
             prediction_variance_px2: 10.0,
             detection_variance_px2: 0.2,
             max_entropy: 16.0,
             border_margin_px: 5.0,
+            min_box_px: 4.0,
             min_detection_score: 0.0,
             confirm_hits: 3,
             confirm_window_frames: 5,
@@ -112,11 +122,17 @@ impl TrackerConfig {
         if !(self.detection_variance_px2.is_finite() && self.detection_variance_px2 > 0.0) {
             return bad("detection_variance_px2", "must be finite and > 0");
         }
+        if !(self.register_iou_threshold > 0.0 && self.register_iou_threshold <= 1.0) {
+            return bad("register_iou_threshold", "must be in (0, 1]");
+        }
         if !self.max_entropy.is_finite() {
             return bad("max_entropy", "must be finite");
         }
         if !(self.border_margin_px.is_finite() && self.border_margin_px >= 0.0) {
             return bad("border_margin_px", "must be finite and ≥ 0");
+        }
+        if !(self.min_box_px.is_finite() && self.min_box_px >= 0.0) {
+            return bad("min_box_px", "must be finite and ≥ 0");
         }
         if !self.min_detection_score.is_finite() {
             return bad("min_detection_score", "must be finite");
@@ -281,10 +297,11 @@ impl Tracker {
         // 2. Drop tracks that left the image or grew too uncertain.
         let margin = self.config.border_margin_px;
         let max_entropy = self.config.max_entropy;
+        let min_size = self.config.min_box_px.max(f64::MIN_POSITIVE);
         self.tracks.retain(|t| {
             let b = t.bbox();
-            b.width() > 0.0
-                && b.height() > 0.0
+            b.width() >= min_size
+                && b.height() >= min_size
                 && b.is_inside_image(width, height, margin)
                 && box_entropy(&t.estimate.covariance_px2) < max_entropy
         });
@@ -318,7 +335,7 @@ impl Tracker {
             let overlaps = self
                 .tracks
                 .iter()
-                .any(|t| t.bbox().iou(&d.bbox) >= self.config.iou_threshold);
+                .any(|t| t.bbox().iou(&d.bbox) >= self.config.register_iou_threshold);
             if overlaps {
                 continue;
             }
