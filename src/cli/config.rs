@@ -61,8 +61,7 @@ mod tests {
             localization,
             crate::localization::LocalizationConfig::default()
         );
-        let tracker: crate::tracking::TrackerConfig =
-            value["tracker"].clone().try_into().unwrap();
+        let tracker: crate::tracking::TrackerConfig = value["tracker"].clone().try_into().unwrap();
         assert_eq!(tracker, crate::tracking::TrackerConfig::default());
     }
 }

@@ -21,11 +21,11 @@ use clap::{Args, ValueEnum};
 use nalgebra::{Isometry3, UnitQuaternion};
 use scarp_datasets::sequence::Sequence;
 use scarp_datasets::sequence::SequenceEntry;
+use scarp_datasets::world::World;
 use scarp_export::atomic::write_bytes_atomically;
 use scarp_export::glb::{GlbNode, GlbOptions, write_glb};
 use scarp_export::ply::{PlyEncoding, write_mesh};
 use scarp_export::tum::{StampedPose, write_tum_trajectory};
-use scarp_datasets::world::World;
 use scarp_slam::TriangleMesh;
 use scarp_slam::mapping::{
     KeyframeSet, ModelTracker, ModelTrackingConfig, RefineConfig, TrackingReferenceKind,
@@ -183,8 +183,8 @@ fn refine(
         mesh_before: true,
         ..RefineConfig::default()
     };
-    let refined = refine_keyframes(&seq.camera, &keyframes.set, &config)
-        .context("refining the keyframes")?;
+    let refined =
+        refine_keyframes(&seq.camera, &keyframes.set, &config).context("refining the keyframes")?;
     let stamped = |poses: &[Isometry3<f64>]| -> Vec<StampedPose> {
         keyframes
             .timestamps_s
@@ -379,9 +379,15 @@ fn fuse_with_odometry(
         if tracked.keyframe.is_some() {
             keyframes.push(i);
             if let Some(stored) = stored.as_mut() {
-                stored.set.world_from_camera_odometry.push(tracked.world_from_camera);
+                stored
+                    .set
+                    .world_from_camera_odometry
+                    .push(tracked.world_from_camera);
                 stored.set.world_from_camera_estimate.push(estimate);
-                stored.set.odometry_covariance.push(tracked.keyframe_covariance);
+                stored
+                    .set
+                    .odometry_covariance
+                    .push(tracked.keyframe_covariance);
                 stored.set.frames.push(frame);
                 stored.timestamps_s.push(entry.timestamp_s);
                 stored.truth.push(entry.world_from_camera_truth);

@@ -39,7 +39,10 @@ fn load_config(path: Option<&PathBuf>) -> anyhow::Result<MissionConfig> {
     };
     let text =
         std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    Ok(MissionConfig::from_toml_str(&text, &path.display().to_string())?)
+    Ok(MissionConfig::from_toml_str(
+        &text,
+        &path.display().to_string(),
+    )?)
 }
 
 /// Runs `scarp simulate`.

@@ -367,6 +367,44 @@ pub fn evaluate_mesh(
     config: &MeshEvalConfig,
     visibility: Option<&Visibility<'_>>,
 ) -> Result<MeshEvaluation, MeshEvalError> {
+    let mut scores = evaluate_mesh_at_taus(
+        reconstruction,
+        ground_truth,
+        config,
+        visibility,
+        &[config.tau_m],
+    )?;
+    // One τ in, one score out.
+    Ok(scores.remove(0))
+}
+
+/// As [`evaluate_mesh`], scoring the same sampled distances at each of `taus_m` (metres) in
+/// turn: the sampling, the nearest-neighbour queries and the visibility test run once.
+/// `config.tau_m` is checked but not used.
+///
+/// # Errors
+/// As [`evaluate_mesh`], plus [`MeshEvalError::InvalidConfig`] for a bad or missing τ.
+pub fn evaluate_mesh_at_taus(
+    reconstruction: &TriangleMesh,
+    ground_truth: &TriangleMesh,
+    config: &MeshEvalConfig,
+    visibility: Option<&Visibility<'_>>,
+    taus_m: &[f64],
+) -> Result<Vec<MeshEvaluation>, MeshEvalError> {
+    if let Some(&tau) = taus_m.iter().find(|t| !(t.is_finite() && **t > 0.0)) {
+        return Err(MeshEvalError::InvalidConfig {
+            field: "tau_m",
+            value: tau,
+            reason: "must be positive",
+        });
+    }
+    if taus_m.is_empty() {
+        return Err(MeshEvalError::InvalidConfig {
+            field: "tau_m",
+            value: f64::NAN,
+            reason: "at least one τ is needed",
+        });
+    }
     let bad = |field, value, reason| MeshEvalError::InvalidConfig {
         field,
         value,
@@ -449,9 +487,14 @@ pub fn evaluate_mesh(
         None => (gt_points, 1.0),
     };
     let completeness: Vec<f64> = kept.par_iter().map(|p| recon_index.distance(p)).collect();
-    let mut out = score_distances(&accuracy, &completeness, config.tau_m);
-    out.gt_visible_fraction = fraction;
-    Ok(out)
+    Ok(taus_m
+        .iter()
+        .map(|&tau| {
+            let mut out = score_distances(&accuracy, &completeness, tau);
+            out.gt_visible_fraction = fraction;
+            out
+        })
+        .collect())
 }
 
 #[cfg(test)]

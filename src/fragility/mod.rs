@@ -72,6 +72,7 @@ pub mod mass;
 #[cfg(test)]
 mod real_rock;
 pub mod rocking;
+pub mod scan;
 mod section;
 #[cfg(test)]
 pub(crate) mod test_shapes;

@@ -129,13 +129,21 @@ mod tests {
         catalog.insert(1, mapped);
         assert!(is_already_handled(
             &catalog,
-            &Point3::new(1.2, 0.0, 1.0),
-            1.0
+            &Point3::new(1.2, 0.0, 3.0),
+            2.0,
+            None
+        ));
+        assert!(!is_already_handled(
+            &catalog,
+            &Point3::new(1.2, 0.0, 3.0),
+            2.0,
+            Some(1)
         ));
         assert!(!is_already_handled(
             &catalog,
             &Point3::new(5.0, 0.0, 1.0),
-            1.0
+            2.0,
+            None
         ));
         let fresh = MissionTarget::new(2, &Point3::new(9.0, 0.0, 1.0), 4.0);
         assert!(!fresh.is_finished());

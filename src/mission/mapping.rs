@@ -17,7 +17,9 @@ use scarp_export::glb::{GlbNode, GlbOptions, write_glb};
 use scarp_export::ply::{PlyEncoding, write_mesh, write_point_cloud};
 use scarp_export::tum::StampedPose;
 use scarp_planning::prelude::VerticalCylinder;
-use scarp_slam::mapping::{KeyframeSet, ModelTracker, ModelTrackingConfig, RefineConfig, refine_keyframes};
+use scarp_slam::mapping::{
+    KeyframeSet, ModelTracker, ModelTrackingConfig, RefineConfig, refine_keyframes,
+};
 use scarp_slam::meshing::MeshingConfig;
 use scarp_slam::tsdf::Roi;
 use scarp_slam::tsdf::TsdfConfig;
@@ -27,8 +29,11 @@ use super::config::MissionConfig;
 use super::coverage::CylinderCoverage;
 use super::evaluation::nearest_rock;
 use super::report::{StageTimings, TargetReport};
-use crate::evaluation::mesh::{MeshEvalConfig, Visibility, evaluate_mesh};
-use crate::evaluation::trajectory::{Alignment, TrajectoryEvalConfig, evaluate_trajectory, umeyama};
+use crate::evaluation::mesh::{MeshEvalConfig, MeshEvaluation, Visibility, evaluate_mesh_at_taus};
+use crate::evaluation::trajectory::{
+    Alignment, TrajectoryEvalConfig, evaluate_trajectory, umeyama,
+};
+use crate::fragility::scan::close_scan;
 use crate::fragility::{ContactSpec, analyze, analyze_detailed};
 
 /// A frame kept for bundle adjustment and re-integration.
@@ -87,11 +92,17 @@ pub fn sees_cylinder(
     ];
     for k in 0..8 {
         let a = f64::from(k) / 8.0 * std::f64::consts::TAU;
-        probes.push(cylinder.axis_point(mid) + Vector3::new(a.cos(), a.sin(), 0.0) * cylinder.radius_m);
+        probes.push(
+            cylinder.axis_point(mid) + Vector3::new(a.cos(), a.sin(), 0.0) * cylinder.radius_m,
+        );
     }
     probes.iter().any(|p| {
         let q = camera_from_world * p;
-        q.z > 0.0 && q.z <= max_depth_m && camera.project(&q).is_some_and(|px| camera.in_bounds(&px, 0.0))
+        q.z > 0.0
+            && q.z <= max_depth_m
+            && camera
+                .project(&q)
+                .is_some_and(|px| camera.in_bounds(&px, 0.0))
     })
 }
 
@@ -154,7 +165,12 @@ impl MappingSession {
         world_from_camera_truth: &Isometry3<f64>,
     ) -> anyhow::Result<()> {
         let max_depth = f64::from(self.tracker.volume().config().max_depth_m);
-        if !sees_cylinder(&self.camera, world_from_camera_estimate, &self.cylinder, max_depth) {
+        if !sees_cylinder(
+            &self.camera,
+            world_from_camera_estimate,
+            &self.cylinder,
+            max_depth,
+        ) {
             return Ok(());
         }
         frame.instance_mask = None;
@@ -162,7 +178,8 @@ impl MappingSession {
         if tracked.fell_back {
             self.odometry_failures += 1;
         }
-        self.coverage.observe(&self.camera, &tracked.world_from_camera);
+        self.coverage
+            .observe(&self.camera, &tracked.world_from_camera);
         if tracked.keyframe.is_some() {
             self.stored.push(StoredFrame {
                 frame,
@@ -177,7 +194,10 @@ impl MappingSession {
     }
 }
 
-fn stamped(frames: &[StoredFrame], pose: impl Fn(&StoredFrame) -> Isometry3<f64>) -> Vec<StampedPose> {
+fn stamped(
+    frames: &[StoredFrame],
+    pose: impl Fn(&StoredFrame) -> Isometry3<f64>,
+) -> Vec<StampedPose> {
     frames
         .iter()
         .map(|f| StampedPose {
@@ -202,14 +222,19 @@ fn ate_rmse(frames: &[StoredFrame], poses: &[Isometry3<f64>]) -> Option<f64> {
         alignment: Alignment::Se3,
         ..TrajectoryEvalConfig::default()
     };
-    evaluate_trajectory(&truth, &estimate, &config).ok().map(|m| m.ate_rmse_m)
+    evaluate_trajectory(&truth, &estimate, &config)
+        .ok()
+        .map(|m| m.ate_rmse_m)
 }
 
 /// The rigid transform that best maps the mapping trajectory's camera centres onto the true
 /// ones (Umeyama, no scale): the map frame's offset from the world, the GPS error at mapping.
 fn map_to_world(frames: &[StoredFrame], poses: &[Isometry3<f64>]) -> Option<Isometry3<f64>> {
     let source: Vec<Vector3<f64>> = poses.iter().map(|p| p.translation.vector).collect();
-    let target: Vec<Vector3<f64>> = frames.iter().map(|f| f.world_from_camera_truth.translation.vector).collect();
+    let target: Vec<Vector3<f64>> = frames
+        .iter()
+        .map(|f| f.world_from_camera_truth.translation.vector)
+        .collect();
     let s = umeyama(&source, &target, false).ok()?;
     Some(Isometry3::from_parts(
         s.translation.into(),
@@ -251,7 +276,10 @@ pub fn finish_target(
     let keyframes = KeyframeSet {
         frames: frames.iter().map(|f| f.frame.clone()).collect(),
         world_from_camera_odometry: odometry_poses.clone(),
-        world_from_camera_estimate: frames.iter().map(|f| f.world_from_camera_estimate).collect(),
+        world_from_camera_estimate: frames
+            .iter()
+            .map(|f| f.world_from_camera_estimate)
+            .collect(),
         odometry_covariance: frames.iter().map(|f| f.odometry_covariance).collect(),
     };
     let refine = RefineConfig {
@@ -260,17 +288,22 @@ pub fn finish_target(
             min_component_triangles: config.mapping.min_component_triangles,
             ..config.mapping.refine.meshing
         },
+        // The keyframes at their odometry poses, meshed too: the F-score before BA.
+        mesh_before: true,
         ..config.mapping.refine.clone()
     };
     let refined = refine_keyframes(&session.camera, &keyframes, &refine)?;
     let mesh = refined.mesh;
+    let mesh_before = refined.mesh_before;
     let refined = refined.world_from_camera;
     report.triangles = mesh.faces.len();
     timings.ba_mesh_s += clock.elapsed().as_secs_f64();
 
     let clock = Instant::now();
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    let fragility = analyze_detailed(&mesh, ContactSpec::Auto, &config.fragility);
+    // The scan is open (ROI cut, unseen parts): separate the rock at its neck and close it.
+    let fragility = close_scan(&mesh)
+        .and_then(|closed| analyze_detailed(&closed.mesh, ContactSpec::Auto, &config.fragility));
     let mut mapped = complete;
     match &fragility {
         Ok(analysis) => {
@@ -308,17 +341,75 @@ pub fn finish_target(
         &GlbOptions::default(),
     )?;
     let cloud = PointCloud::from_positions(points.iter().map(|p| p.cast::<f32>()).collect());
-    write_point_cloud(dir.join("points.ply"), &cloud, PlyEncoding::BinaryLittleEndian)?;
+    write_point_cloud(
+        dir.join("points.ply"),
+        &cloud,
+        PlyEncoding::BinaryLittleEndian,
+    )?;
     if !mesh.faces.is_empty() {
-        let view_mesh = fragility.as_ref().map_or_else(|_| mesh.clone(), |a| a.closed_rock());
+        let view_mesh = fragility
+            .as_ref()
+            .map_or_else(|_| mesh.clone(), |a| a.closed_rock());
         super::html::write_mesh_views(world, &view_mesh, dir)?;
     }
     timings.fragility_export_s += clock.elapsed().as_secs_f64();
 
     let clock = Instant::now();
-    score_against_ground_truth(world, config, &frames, &odometry_poses, &refined, &mesh, report, &session.camera);
+    score_against_ground_truth(
+        world,
+        config,
+        &frames,
+        &odometry_poses,
+        &refined,
+        &mesh,
+        mesh_before.as_ref(),
+        report,
+        &session.camera,
+    );
     timings.evaluation_s += clock.elapsed().as_secs_f64();
     Ok(mapped)
+}
+
+/// F-scores at 1 and 2 cm (and accuracy, completeness, visible fraction at 1 cm) of `mesh`,
+/// built at `poses` in the map frame, against `rock`, after the SE(3) alignment of `poses` to
+/// the truth and counting only the ground truth visible from the mapping flight.
+fn score_mesh(
+    world: &World,
+    rock: &scarp_datasets::world::Rock,
+    frames: &[StoredFrame],
+    poses: &[Isometry3<f64>],
+    mesh: &TriangleMesh,
+    camera: &PinholeCamera,
+) -> Option<[MeshEvaluation; 2]> {
+    let world_from_map = map_to_world(frames, poses)?;
+    let mut aligned = mesh.clone();
+    aligned.transform(&world_from_map);
+    // Visibility from at most 60 of the mapping flight's true poses: enough to tell the base
+    // and the contact from what a camera saw.
+    let step = frames.len().div_ceil(60).max(1);
+    let visibility = Visibility {
+        world,
+        camera: *camera,
+        world_from_camera: frames
+            .iter()
+            .step_by(step)
+            .map(|f| f.world_from_camera_truth)
+            .collect(),
+        tolerance_m: 0.01,
+    };
+    let config = MeshEvalConfig {
+        crop_to_gt_m: Some(0.1),
+        ..MeshEvalConfig::default()
+    };
+    let scores = evaluate_mesh_at_taus(
+        &aligned,
+        &rock.mesh,
+        &config,
+        Some(&visibility),
+        &[0.01, 0.02],
+    )
+    .ok()?;
+    scores.try_into().ok()
 }
 
 /// Fills the ground-truth fields of `report` (nothing when no true rock is near).
@@ -330,6 +421,7 @@ fn score_against_ground_truth(
     odometry_poses: &[Isometry3<f64>],
     refined: &[Isometry3<f64>],
     mesh: &TriangleMesh,
+    mesh_before: Option<&TriangleMesh>,
     report: &mut TargetReport,
     camera: &PinholeCamera,
 ) {
@@ -339,40 +431,25 @@ fn score_against_ground_truth(
     report.ate_before_ba_m = ate_rmse(frames, odometry_poses);
     report.ate_after_ba_m = ate_rmse(frames, refined);
     if let Some(pedestal) = &rock.pedestal
-        && let Ok(gt) = analyze(&rock.mesh, ContactSpec::Pedestal(pedestal), &config.fragility)
+        && let Ok(gt) = analyze(
+            &rock.mesh,
+            ContactSpec::Pedestal(pedestal),
+            &config.fragility,
+        )
     {
         report.alpha_min_gt_deg = Some(gt.alpha_min_deg);
         report.alpha_error_deg = report.alpha_min_deg.map(|a| (a - gt.alpha_min_deg).abs());
     }
-    let Some(world_from_map) = map_to_world(frames, refined) else {
-        return;
-    };
-    let mut aligned = mesh.clone();
-    aligned.transform(&world_from_map);
-    // Visibility from at most 60 of the mapping flight's true poses: enough to tell the base
-    // and the contact from what a camera saw.
-    let step = frames.len().div_ceil(60).max(1);
-    let visibility = Visibility {
-        world,
-        camera: *camera,
-        world_from_camera: frames.iter().step_by(step).map(|f| f.world_from_camera_truth).collect(),
-        tolerance_m: 0.01,
-    };
-    for (tau, slot) in [(0.01, 0usize), (0.02, 1)] {
-        let eval_config = MeshEvalConfig {
-            tau_m: tau,
-            crop_to_gt_m: Some(0.1),
-            ..MeshEvalConfig::default()
-        };
-        if let Ok(e) = evaluate_mesh(&aligned, &rock.mesh, &eval_config, Some(&visibility)) {
-            if slot == 0 {
-                report.fscore_1cm = Some(e.fscore);
-                report.accuracy_mean_m = Some(e.accuracy_mean_m);
-                report.completeness_mean_m = Some(e.completeness_mean_m);
-                report.gt_visible_fraction = Some(e.gt_visible_fraction);
-            } else {
-                report.fscore_2cm = Some(e.fscore);
-            }
-        }
+    if let Some([at_1cm, at_2cm]) = score_mesh(world, rock, frames, refined, mesh, camera) {
+        report.fscore_1cm = Some(at_1cm.fscore);
+        report.fscore_2cm = Some(at_2cm.fscore);
+        report.accuracy_mean_m = Some(at_1cm.accuracy_mean_m);
+        report.completeness_mean_m = Some(at_1cm.completeness_mean_m);
+        report.gt_visible_fraction = Some(at_1cm.gt_visible_fraction);
+    }
+    if let Some(before) = mesh_before
+        && let Some([_, at_2cm]) = score_mesh(world, rock, frames, odometry_poses, before, camera)
+    {
+        report.fscore_2cm_before_ba = Some(at_2cm.fscore);
     }
 }

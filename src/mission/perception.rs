@@ -47,7 +47,10 @@ pub struct TargetState {
 /// depths in [3, 18] m, so a rock first seen at 25 m would seed a point set that cannot reach
 /// it, and the filter would converge in mid-air. The rock comes into range as the search goes
 /// on.
-pub fn median_depth_in_box(depth_m: &scarp_slam::image::DepthImage, bbox: &BoundingBox) -> Option<f64> {
+pub fn median_depth_in_box(
+    depth_m: &scarp_slam::image::DepthImage,
+    bbox: &BoundingBox,
+) -> Option<f64> {
     let (cx, cy) = bbox.center();
     let (hw, hh) = (0.25 * bbox.width(), 0.25 * bbox.height());
     let mut samples = Vec::with_capacity(81);
@@ -134,7 +137,9 @@ impl Perception {
             .filter(|t| {
                 median_depth_in_box(&frame.depth_m, &t.bbox).is_some_and(|d| d <= max_depth_m)
             })
-            .filter(|t| BoundingBox::new(t.bbox.x_min, t.bbox.y_min, t.bbox.x_max, t.bbox.y_max).is_ok())
+            .filter(|t| {
+                BoundingBox::new(t.bbox.x_min, t.bbox.y_min, t.bbox.x_max, t.bbox.y_max).is_ok()
+            })
             .map(|t| (t.id, t.bbox))
             .collect();
         let observed = self

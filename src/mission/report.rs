@@ -55,6 +55,8 @@ pub struct TargetReport {
     pub fscore_1cm: Option<f64>,
     /// F-score at τ = 2 cm against the visible ground truth.
     pub fscore_2cm: Option<f64>,
+    /// F-score at τ = 2 cm of the keyframes fused at their odometry poses (before BA).
+    pub fscore_2cm_before_ba: Option<f64>,
     /// Mean distance from the mesh to the ground truth, metres.
     pub accuracy_mean_m: Option<f64>,
     /// Mean distance from the visible ground truth to the mesh, metres.

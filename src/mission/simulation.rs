@@ -19,12 +19,12 @@ use scarp_planning::prelude::{
 };
 use scarp_slam::{PinholeCamera, RgbdFrame};
 
+use super::catalog::{Catalog, MissionTarget, TargetStatus, is_already_handled};
 use super::config::MissionConfig;
 use super::mapping::{MappingSession, finish_target};
+use super::mode::{FlightLogEntry, Mode};
 use super::motion::MotionSystem;
 use super::perception::Perception;
-use super::mode::{FlightLogEntry, Mode};
-use super::catalog::{Catalog, MissionTarget, TargetStatus, is_already_handled};
 use super::report::{MissionReport, ModeChange, StageTimings};
 
 /// Where the lawn-mower was left, to resume it.
@@ -123,7 +123,8 @@ impl<'a> Mission<'a> {
         .context("planning the lawn-mower search")?;
         let waypoints = lawn.path.waypoints.clone();
         let first = *waypoints.first().context("the search pattern is empty")?;
-        let mut motion = MotionSystem::new(&config.planning.flight, first.position_m, first.yaw_rad)?;
+        let mut motion =
+            MotionSystem::new(&config.planning.flight, first.position_m, first.yaw_rad)?;
         motion.follow(&waypoints[1..], &env, &config.planning)?;
         let perception = Perception::new(world, config, inputs.seed)?;
         let estimator = StateEstimator::new(&config.estimator, derive_seed(inputs.seed, 0x5e57));
@@ -182,7 +183,8 @@ impl<'a> Mission<'a> {
             self.motion.time_s(),
             self.mode.as_str(),
             mode.as_str(),
-            mode.target().map_or(String::new(), |id| format!(" (target {id})"))
+            mode.target()
+                .map_or(String::new(), |id| format!(" (target {id})"))
         );
         self.mode = mode;
         self.report.modes.push(ModeChange {
@@ -246,8 +248,14 @@ impl<'a> Mission<'a> {
         self.motion.advance_to(t, &drift)?;
         let t = self.motion.time_s();
         let world_from_body = self.motion.world_from_body();
-        if let Some(c) = self.env.clearance_at(&world_from_body.translation.vector.into()) {
-            self.min_clearance_m = Some(self.min_clearance_m.map_or(c.clearance_m, |m| m.min(c.clearance_m)));
+        if let Some(c) = self
+            .env
+            .clearance_at(&world_from_body.translation.vector.into())
+        {
+            self.min_clearance_m = Some(
+                self.min_clearance_m
+                    .map_or(c.clearance_m, |m| m.min(c.clearance_m)),
+            );
             if c.clearance_m < self.inputs.config.collision_radius_m {
                 self.report.collisions += 1;
             }
@@ -369,12 +377,20 @@ impl<'a> Mission<'a> {
                 .insert(state.id, MissionTarget::new(state.id, &state.center, t));
         }
         // Targets the filter removed as false never become mission targets.
-        let alive: Vec<u32> = self.perception.target_states().iter().map(|s| s.id).collect();
+        let alive: Vec<u32> = self
+            .perception
+            .target_states()
+            .iter()
+            .map(|s| s.id)
+            .collect();
         self.targets
             .retain(|id, m| m.status != TargetStatus::Localizing || alive.contains(id));
         for state in self.perception.target_states() {
             if let Some(m) = self.targets.get_mut(&state.id)
-                && matches!(m.status, TargetStatus::Localizing | TargetStatus::FineLocalizing)
+                && matches!(
+                    m.status,
+                    TargetStatus::Localizing | TargetStatus::FineLocalizing
+                )
             {
                 m.report.center = state.center.coords.into();
                 m.covariance_xy = Some(state.covariance_xy);
@@ -436,7 +452,11 @@ impl<'a> Mission<'a> {
         }
     }
 
-    fn start_fine_localization(&mut self, id: u32, timings: &mut StageTimings) -> anyhow::Result<()> {
+    fn start_fine_localization(
+        &mut self,
+        id: u32,
+        timings: &mut StageTimings,
+    ) -> anyhow::Result<()> {
         if self.resume_point.is_none() {
             self.resume_point = Some(self.motion.current_waypoint());
         }
@@ -479,7 +499,11 @@ impl<'a> Mission<'a> {
     }
 
     /// The mapping cylinder from the converged point set (paper §III, mapping).
-    fn target_cylinder(&self, points: &[Point3<f64>], center: &Point3<f64>) -> anyhow::Result<VerticalCylinder> {
+    fn target_cylinder(
+        &self,
+        points: &[Point3<f64>],
+        center: &Point3<f64>,
+    ) -> anyhow::Result<VerticalCylinder> {
         let c = &self.inputs.config.cylinder;
         let mut radii: Vec<f64> = points
             .iter()
@@ -494,7 +518,9 @@ impl<'a> Mission<'a> {
         let ground = self.inputs.world.terrain_height_m(center.x, center.y);
         let bottom = ground - c.bottom_below_terrain_m;
         let top = (center.z + c.top_over_center_radii * radius).max(bottom + 2.0 * radius);
-        Ok(VerticalCylinder::new(center.x, center.y, radius, bottom, top)?)
+        Ok(VerticalCylinder::new(
+            center.x, center.y, radius, bottom, top,
+        )?)
     }
 
     fn start_mapping(&mut self, id: u32, timings: &mut StageTimings) -> anyhow::Result<()> {
@@ -597,7 +623,9 @@ impl<'a> Mission<'a> {
         self.perception.reset_tracks()?;
         let clock = Instant::now();
         let mut path: Vec<Waypoint> = self.resume_point.take().into_iter().collect();
-        path.extend_from_slice(&self.search.waypoints[self.search.next.min(self.search.waypoints.len())..]);
+        path.extend_from_slice(
+            &self.search.waypoints[self.search.next.min(self.search.waypoints.len())..],
+        );
         let config = &self.inputs.config;
         if path.is_empty() {
             self.set_mode(Mode::Done);
@@ -609,7 +637,8 @@ impl<'a> Mission<'a> {
         climb.position_m.z = self.search.altitude_m;
         let mut waypoints = vec![climb];
         waypoints.extend(path);
-        self.motion.follow(&waypoints, &self.env, &config.planning)?;
+        self.motion
+            .follow(&waypoints, &self.env, &config.planning)?;
         timings.planning_s += clock.elapsed().as_secs_f64();
         self.set_mode(Mode::Search);
         Ok(())
@@ -625,7 +654,11 @@ impl<'a> Mission<'a> {
             self.set_status(id, TargetStatus::Incomplete);
         }
         let clock = Instant::now();
-        super::evaluation::ground_truth_summary(self.inputs.world, &mut self.targets, &mut self.report);
+        super::evaluation::ground_truth_summary(
+            self.inputs.world,
+            &mut self.targets,
+            &mut self.report,
+        );
         timings.evaluation_s += clock.elapsed().as_secs_f64();
         self.write_trajectories(&out)?;
         let sim = self.motion.time_s();
@@ -647,7 +680,13 @@ impl<'a> Mission<'a> {
                 alt_m: origin.alt_m,
             },
         )?;
-        super::html::write_report(&out, self.inputs.world, &self.report, &self.log, &self.targets)?;
+        super::html::write_report(
+            &out,
+            self.inputs.world,
+            &self.report,
+            &self.log,
+            &self.targets,
+        )?;
         Ok(self.report)
     }
 

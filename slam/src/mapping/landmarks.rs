@@ -189,15 +189,12 @@ fn close_loop(
     let camera_from_world = views[0].world_from_camera.inverse();
     let merge_d2 = (config.loop_merge_px * config.loop_merge_px) as f32;
     for (track, result) in live.iter_mut().zip(tracked) {
-        if result.status != KltStatus::Tracked
-            || track.observations.iter().any(|o| o.0 == 0)
-        {
+        if result.status != KltStatus::Tracked || track.observations.iter().any(|o| o.0 == 0) {
             continue;
         }
         let pixel = Vector2::new(f64::from(result.position.x), f64::from(result.position.y));
         let predicted = camera.project(&(camera_from_world * Point3::from(track.point_world)));
-        if !predicted.is_some_and(|p| (p.coords - pixel).norm() <= config.max_prediction_error_px)
-        {
+        if !predicted.is_some_and(|p| (p.coords - pixel).norm() <= config.max_prediction_error_px) {
             continue;
         }
         // The nearest unmerged track started in keyframe 0.

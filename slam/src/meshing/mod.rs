@@ -281,5 +281,45 @@ pub fn extract_mesh(volume: &TsdfVolume, config: &MeshingConfig) -> TriangleMesh
         mesh.colors.extend(b.colors);
     }
     debug_assert!(BLOCK_VOXELS * 3 <= usize::from(u16::MAX));
+    remove_coincident_face_pairs(&mut mesh.faces);
     remove_small_components(&mesh, config.min_component_triangles)
+}
+
+/// Removes triangles that share all three vertices with another triangle, in pairs.
+///
+/// Where the surface runs exactly along a cube face, the two cubes on either side each emit a
+/// triangle on that face with opposite winding: a zero-thickness flap whose edges belong to
+/// four triangles, which makes the mesh non-manifold (and breaks the closing and the mass
+/// properties of fragility analysis). The pair adds nothing to the surface, so both go.
+pub fn remove_coincident_face_pairs(faces: &mut Vec<[u32; 3]>) {
+    let mut seen: std::collections::HashMap<[u32; 3], usize> =
+        std::collections::HashMap::with_capacity(faces.len());
+    let mut drop = vec![false; faces.len()];
+    for (i, f) in faces.iter().enumerate() {
+        let mut key = *f;
+        key.sort_unstable();
+        match seen.remove(&key) {
+            Some(j) => {
+                drop[i] = true;
+                drop[j] = true;
+            }
+            None => {
+                seen.insert(key, i);
+            }
+        }
+    }
+    let mut keep = drop.iter().map(|d| !d);
+    faces.retain(|_| keep.next().unwrap_or(true));
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn coincident_opposite_faces_go_in_pairs() {
+        let mut faces = vec![[0, 1, 2], [2, 3, 0], [0, 2, 1], [4, 5, 6]];
+        remove_coincident_face_pairs(&mut faces);
+        assert_eq!(faces, vec![[2, 3, 0], [4, 5, 6]]);
+    }
 }
