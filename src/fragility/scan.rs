@@ -161,37 +161,54 @@ fn fill_holes(mesh: &mut TriangleMesh) -> usize {
     let mut loops = 0;
     for &(start, _) in &boundary {
         while outgoing.get(&start).is_some_and(|v| !v.is_empty()) {
+            // Walk the boundary; a vertex met twice (a pinch, where two holes touch) splits
+            // off the simple loop between its two visits, so every fan closes a simple loop.
             let mut chain = vec![start];
+            let mut position: HashMap<u32, usize> = HashMap::from([(start, 0)]);
             let mut at = start;
             while let Some(next) = outgoing.get_mut(&at).and_then(Vec::pop) {
-                if next == start || chain.len() > mesh.positions.len() {
-                    break;
+                if let Some(&i) = position.get(&next) {
+                    let simple: Vec<u32> = chain.drain(i..).collect();
+                    for v in &simple {
+                        position.remove(v);
+                    }
+                    loops += usize::from(fan(mesh, &simple));
+                    if next == start && chain.is_empty() {
+                        break;
+                    }
                 }
+                position.insert(next, chain.len());
                 chain.push(next);
                 at = next;
             }
-            if chain.len() < 3 {
-                continue;
-            }
-            let n = chain.len() as f32;
-            let centroid = chain.iter().fold(Point3::origin(), |acc: Point3<f32>, &v| {
-                acc + mesh.positions[v as usize].coords / n
-            });
-            let c = mesh.positions.len() as u32;
-            mesh.positions.push(centroid);
-            if !mesh.normals.is_empty() {
-                mesh.normals.push(nalgebra::Vector3::zeros());
-            }
-            if !mesh.colors.is_empty() {
-                mesh.colors.push([128; 3]);
-            }
-            for k in 0..chain.len() {
-                mesh.faces.push([chain[k], chain[(k + 1) % chain.len()], c]);
-            }
-            loops += 1;
+            loops += usize::from(fan(mesh, &chain));
         }
     }
     loops
+}
+
+/// Closes the simple loop `chain` (hole-side order) with a fan around its centroid; `false`
+/// for a loop too short to enclose anything.
+fn fan(mesh: &mut TriangleMesh, chain: &[u32]) -> bool {
+    if chain.len() < 3 {
+        return false;
+    }
+    let n = chain.len() as f32;
+    let centroid = chain.iter().fold(Point3::origin(), |acc: Point3<f32>, &v| {
+        acc + mesh.positions[v as usize].coords / n
+    });
+    let c = mesh.positions.len() as u32;
+    mesh.positions.push(centroid);
+    if !mesh.normals.is_empty() {
+        mesh.normals.push(nalgebra::Vector3::zeros());
+    }
+    if !mesh.colors.is_empty() {
+        mesh.colors.push([128; 3]);
+    }
+    for k in 0..chain.len() {
+        mesh.faces.push([chain[k], chain[(k + 1) % chain.len()], c]);
+    }
+    true
 }
 
 /// Separates the rock from its pedestal and the ground at the neck and closes it.
