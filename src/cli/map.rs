@@ -21,11 +21,11 @@ use clap::{Args, ValueEnum};
 use nalgebra::{Isometry3, UnitQuaternion};
 use scarp_datasets::sequence::Sequence;
 use scarp_datasets::sequence::SequenceEntry;
+use scarp_datasets::world::World;
 use scarp_export::atomic::write_bytes_atomically;
 use scarp_export::glb::{GlbNode, GlbOptions, write_glb};
 use scarp_export::ply::{PlyEncoding, write_mesh};
 use scarp_export::tum::{StampedPose, write_tum_trajectory};
-use scarp_datasets::world::World;
 use scarp_slam::TriangleMesh;
 use scarp_slam::mapping::{
     KeyframeSet, ModelTracker, ModelTrackingConfig, RefineConfig, TrackingReferenceKind,
@@ -87,6 +87,10 @@ pub struct MapArgs {
     /// mesh F-score before and after.
     #[arg(long)]
     pub ba: bool,
+    /// A TOML file of `--ba` settings (the fields of `scarp_slam::mapping::RefineConfig`:
+    /// `landmarks`, `noise`, `solver`, `gps_sigma_m`, ...); missing fields keep their defaults.
+    #[arg(long, requires = "ba")]
+    pub ba_config: Option<PathBuf>,
     /// The world the sequence was rendered from (`default` or a world TOML): its target rock is
     /// the ground truth of the F-scores of `--ba`.
     #[arg(long)]
@@ -174,6 +178,15 @@ fn refine(
     keyframes: &StoredKeyframes,
     extra: &mut serde_json::Map<String, serde_json::Value>,
 ) -> anyhow::Result<TriangleMesh> {
+    let base = match &args.ba_config {
+        Some(path) => {
+            let text = std::fs::read_to_string(path)
+                .with_context(|| format!("reading {}", path.display()))?;
+            toml::from_str::<RefineConfig>(&text)
+                .with_context(|| format!("parsing {}", path.display()))?
+        }
+        None => RefineConfig::default(),
+    };
     let config = RefineConfig {
         tsdf,
         meshing: MeshingConfig {
@@ -181,10 +194,10 @@ fn refine(
             min_component_triangles: args.min_component_triangles,
         },
         mesh_before: true,
-        ..RefineConfig::default()
+        ..base
     };
-    let refined = refine_keyframes(&seq.camera, &keyframes.set, &config)
-        .context("refining the keyframes")?;
+    let refined =
+        refine_keyframes(&seq.camera, &keyframes.set, &config).context("refining the keyframes")?;
     let stamped = |poses: &[Isometry3<f64>]| -> Vec<StampedPose> {
         keyframes
             .timestamps_s
@@ -379,9 +392,15 @@ fn fuse_with_odometry(
         if tracked.keyframe.is_some() {
             keyframes.push(i);
             if let Some(stored) = stored.as_mut() {
-                stored.set.world_from_camera_odometry.push(tracked.world_from_camera);
+                stored
+                    .set
+                    .world_from_camera_odometry
+                    .push(tracked.world_from_camera);
                 stored.set.world_from_camera_estimate.push(estimate);
-                stored.set.odometry_covariance.push(tracked.keyframe_covariance);
+                stored
+                    .set
+                    .odometry_covariance
+                    .push(tracked.keyframe_covariance);
                 stored.set.frames.push(frame);
                 stored.timestamps_s.push(entry.timestamp_s);
                 stored.truth.push(entry.world_from_camera_truth);

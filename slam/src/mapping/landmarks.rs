@@ -189,15 +189,12 @@ fn close_loop(
     let camera_from_world = views[0].world_from_camera.inverse();
     let merge_d2 = (config.loop_merge_px * config.loop_merge_px) as f32;
     for (track, result) in live.iter_mut().zip(tracked) {
-        if result.status != KltStatus::Tracked
-            || track.observations.iter().any(|o| o.0 == 0)
-        {
+        if result.status != KltStatus::Tracked || track.observations.iter().any(|o| o.0 == 0) {
             continue;
         }
         let pixel = Vector2::new(f64::from(result.position.x), f64::from(result.position.y));
         let predicted = camera.project(&(camera_from_world * Point3::from(track.point_world)));
-        if !predicted.is_some_and(|p| (p.coords - pixel).norm() <= config.max_prediction_error_px)
-        {
+        if !predicted.is_some_and(|p| (p.coords - pixel).norm() <= config.max_prediction_error_px) {
             continue;
         }
         // The nearest unmerged track started in keyframe 0.
@@ -396,5 +393,69 @@ fn roi_bounds(roi: &Roi) -> ([f64; 3], [f64; 3]) {
             [center_xy[0] - radius_m, center_xy[1] - radius_m, z_min],
             [center_xy[0] + radius_m, center_xy[1] + radius_m, z_max],
         ),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::look_at;
+
+    #[test]
+    fn depth_at_interpolates_and_rejects_edges() {
+        let mut depth = DepthImage::filled(4, 4, 2.0);
+        *depth.get_mut(1, 1).unwrap() = 2.02;
+        let d = depth_at(&depth, &Vector2::new(0.5, 0.5), 0.02).unwrap();
+        assert!((d - 2.005).abs() < 1e-6, "{d}");
+        *depth.get_mut(2, 2).unwrap() = 3.0;
+        assert_eq!(depth_at(&depth, &Vector2::new(1.5, 1.5), 0.02), None);
+        assert_eq!(depth_at(&depth, &Vector2::new(3.5, 0.0), 0.02), None);
+        assert_eq!(depth_at(&depth, &Vector2::new(f64::NAN, 0.0), 0.02), None);
+    }
+
+    #[test]
+    fn roi_rect_covers_the_projected_region() {
+        let camera = PinholeCamera::from_hfov(640, 480, 80.0).unwrap();
+        let world_from_camera = look_at(
+            &Point3::new(4.0, 0.0, 2.0),
+            &Point3::origin(),
+            &Vector3::z(),
+        )
+        .unwrap();
+        let roi = Roi::Cylinder {
+            center_xy: [0.0, 0.0],
+            z_min: -0.5,
+            z_max: 0.5,
+            radius_m: 0.5,
+        };
+        let rect = roi_rect(&camera, &world_from_camera, &roi, 0.0).unwrap();
+        // The centre projects to the principal point, inside the rectangle, which is smaller
+        // than the image.
+        assert!(rect.u_min < 320 && rect.u_max > 320 && rect.v_min < 240 && rect.v_max > 240);
+        assert!(rect.u_max - rect.u_min < 400);
+        assert!(inside_grown(&roi, &Point3::new(0.6, 0.0, 0.0), 0.2));
+        assert!(!inside_grown(&roi, &Point3::new(0.6, 0.0, 0.0), 0.0));
+        let behind = look_at(
+            &Point3::new(4.0, 0.0, 2.0),
+            &Point3::new(8.0, 0.0, 2.0),
+            &Vector3::z(),
+        )
+        .unwrap();
+        assert_eq!(roi_rect(&camera, &behind, &roi, 0.0), None);
+    }
+
+    #[test]
+    fn bad_settings_are_rejected() {
+        let config = LandmarkConfig {
+            min_observations: 1,
+            ..LandmarkConfig::default()
+        };
+        assert!(matches!(
+            validate(&config),
+            Err(MappingError::InvalidConfig {
+                field: "min_observations",
+                ..
+            })
+        ));
     }
 }

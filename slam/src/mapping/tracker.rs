@@ -19,10 +19,10 @@ use super::MappingError;
 use crate::geometry::check_finite_isometry;
 use crate::image::gray_from_rgb;
 use crate::keyframes::{KeyframeConfig, KeyframeReason, KeyframeSelector};
+use crate::odometry::OdometryResult;
 use crate::odometry::{
     OdometryConfig, RaycastImages, SourceFrame, TrackingReference, frame_pyramid, track,
 };
-use crate::odometry::OdometryResult;
 use crate::tsdf::raycast::{RaycastConfig, raycast};
 use crate::tsdf::{TsdfConfig, TsdfVolume};
 use crate::{PinholeCamera, RgbdFrame};
