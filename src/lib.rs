@@ -9,3 +9,4 @@ pub mod cli;
 pub mod detection;
 pub mod evaluation;
 pub mod fragility;
+pub mod tracking;

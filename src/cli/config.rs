@@ -18,6 +18,17 @@ pub struct AllDefaults {
     pub planning: scarp_planning::PlanningConfig,
     /// Fragility analysis.
     pub fragility: crate::fragility::FragilityConfig,
+    /// Target detectors.
+    pub detection: DetectionDefaults,
+}
+
+/// The detectors' tunables.
+#[derive(Debug, Default, Serialize)]
+pub struct DetectionDefaults {
+    /// The modelled detector of synthetic sequences.
+    pub simulated: crate::detection::SimulatedDetectorConfig,
+    /// The ONNX YOLO detector (cargo feature `onnx`).
+    pub onnx: crate::detection::OnnxDetectorConfig,
 }
 
 /// The defaults as TOML text.
@@ -48,12 +59,18 @@ mod tests {
     fn defaults_print_and_parse_back() {
         let text = defaults_toml().unwrap();
         let value: toml::Table = toml::from_str(&text).unwrap();
-        for section in ["sensor", "estimator", "planning", "fragility"] {
+        for section in ["sensor", "estimator", "planning", "fragility", "detection"] {
             assert!(value.contains_key(section), "{section}");
         }
         let sensor: scarp_datasets::sensor::SensorConfig =
             value["sensor"].clone().try_into().unwrap();
         assert_eq!(sensor, scarp_datasets::sensor::SensorConfig::default());
         assert_eq!(value["sensor"]["baseline_m"].as_float(), Some(0.12));
+        let simulated: crate::detection::SimulatedDetectorConfig =
+            value["detection"]["simulated"].clone().try_into().unwrap();
+        assert_eq!(
+            simulated,
+            crate::detection::SimulatedDetectorConfig::default()
+        );
     }
 }

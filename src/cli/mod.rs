@@ -10,6 +10,7 @@ pub mod odometry;
 pub mod plan;
 pub mod render;
 pub mod simulate;
+pub mod track;
 pub mod world;
 
 use clap::{Parser, Subcommand};
@@ -53,6 +54,9 @@ pub enum Command {
     /// Fuse an RGB-D sequence into a TSDF volume and mesh it (`mesh.ply`, `mesh.glb`,
     /// `map.json`).
     Map(map::MapArgs),
+    /// Detect and track target boxes through a sequence (`tracks.txt`, `track.json`, and
+    /// MOTA / ID switches / mean IoU / false tracks when `boxes.txt` exists).
+    Track(track::TrackArgs),
 }
 
 /// Runs a parsed command line.
@@ -72,6 +76,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Config(args) => config::run(args),
         Command::Plan(args) => plan::run(args),
         Command::Map(args) => map::run(args),
+        Command::Track(args) => track::run(args),
     }
 }
 

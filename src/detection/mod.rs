@@ -7,6 +7,15 @@
 //! Boxes are in continuous pixel coordinates of the input image: pixel centres sit at integers,
 //! so a box covering pixels `0..=9` horizontally spans `x_min = -0.5` to `x_max = 9.5`.
 
+pub mod letterbox;
+pub mod nms;
+pub mod simulated;
+pub mod yolo;
+
+pub use nms::non_max_suppression;
+pub use simulated::{SimulatedDetector, SimulatedDetectorConfig};
+pub use yolo::{OnnxDetectorConfig, YoloLayout};
+
 use scarp_slam::frame::RgbdFrame;
 
 /// An axis-aligned image box, pixels (column `x`, row `y`), continuous coordinates.
@@ -117,6 +126,19 @@ impl BoundingBox {
         }
     }
 
+    /// The box clipped to a `width × height` image (`-0.5 ..= size - 0.5` on each axis),
+    /// `None` when no area is left.
+    pub fn clipped(&self, width: u32, height: u32) -> Option<Self> {
+        let (w, h) = (f64::from(width) - 0.5, f64::from(height) - 0.5);
+        Self::new(
+            self.x_min.clamp(-0.5, w),
+            self.y_min.clamp(-0.5, h),
+            self.x_max.clamp(-0.5, w),
+            self.y_max.clamp(-0.5, h),
+        )
+        .ok()
+    }
+
     /// Whether the box lies inside a `width × height` image with at least `margin_px` to spare
     /// on every side (the image spans `-0.5 ..= width - 0.5`).
     pub fn is_inside_image(&self, width: u32, height: u32, margin_px: f64) -> bool {
@@ -210,5 +232,20 @@ mod tests {
         assert_eq!((b.width(), b.height()), (10.0, 5.0));
         assert!(b.is_inside_image(10, 5, 0.0));
         assert!(!b.is_inside_image(10, 5, 1.0));
+    }
+
+    #[test]
+    fn clipping_to_the_image() {
+        let b = BoundingBox::new(-10.0, 2.0, 5.0, 30.0).unwrap();
+        assert_eq!(
+            b.clipped(10, 20),
+            Some(BoundingBox::new(-0.5, 2.0, 5.0, 19.5).unwrap())
+        );
+        assert_eq!(
+            BoundingBox::new(20.0, 0.0, 30.0, 5.0)
+                .unwrap()
+                .clipped(10, 20),
+            None
+        );
     }
 }

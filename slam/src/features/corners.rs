@@ -118,7 +118,7 @@ impl PixelRect {
         let v0 = y_min.ceil().max(0.0);
         let u1 = x_max.floor().min(f64::from(width - 1));
         let v1 = y_max.floor().min(f64::from(height - 1));
-        (u0 <= u1 && v0 <= v1).then(|| Self {
+        (u0 <= u1 && v0 <= v1).then_some(Self {
             u_min: u0 as u32,
             v_min: v0 as u32,
             u_max: u1 as u32,

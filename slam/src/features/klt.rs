@@ -66,7 +66,7 @@ impl KltConfig {
     /// [`FeatureError::InvalidConfig`] naming the field.
     pub fn validate(&self) -> Result<(), FeatureError> {
         let bad = |field, reason| Err(FeatureError::InvalidConfig { field, reason });
-        if self.window_px < 3 || self.window_px % 2 == 0 || self.window_px > 101 {
+        if self.window_px < 3 || self.window_px.is_multiple_of(2) || self.window_px > 101 {
             return bad("window_px", "must be odd and in 3..=101");
         }
         if self.max_iterations == 0 {
@@ -305,7 +305,7 @@ fn track_one(
         residual: f32::INFINITY,
         forward_backward_px: f32::NAN,
     };
-    if !(p0.x.is_finite() && p0.y.is_finite()) || !inside(&prev.levels[0], p0) {
+    if !(p0.x.is_finite() && p0.y.is_finite() && inside(&prev.levels[0], p0)) {
         return failed(KltStatus::OutOfImage);
     }
     let half = (config.window_px / 2) as i32;
@@ -367,7 +367,25 @@ fn refine_level(
     // Template samples and gradients; `None` where the window leaves the image.
     let mut template: Vec<Option<(f32, f32, f32)>> = Vec::with_capacity(side * side);
     let (mut gxx, mut gxy, mut gyy) = (0.0f32, 0.0f32, 0.0f32);
-    for j in -half..=half {
+    let mut patch = Vec::new();
+    if sample_window(t_img, p.x, p.y, half + 1, &mut patch) {
+        // Fast path: the window and its one-pixel frame are inside the image. Central
+        // differences of the bilinear patch equal bilinear samples of central differences.
+        let stride = side + 2;
+        for j in 0..side {
+            for i in 0..side {
+                let c = (j + 1) * stride + i + 1;
+                let gx = 0.5 * (patch[c + 1] - patch[c - 1]);
+                let gy = 0.5 * (patch[c + stride] - patch[c - stride]);
+                gxx += gx * gx;
+                gxy += gx * gy;
+                gyy += gy * gy;
+                template.push(Some((patch[c], gx, gy)));
+            }
+        }
+    }
+    let slow_template = template.is_empty();
+    for j in (-half..=half).filter(|_| slow_template) {
         for i in -half..=half {
             let (x, y) = (p.x + i as f32, p.y + j as f32);
             let s = (|| {
@@ -396,10 +414,22 @@ fn refine_level(
         return LevelResult::Untextured;
     }
     let inv = [gyy / det, -gxy / det, gxx / det];
+    let unwarped = *linear == Matrix2::identity();
+    let mut next_patch = Vec::new();
     for _ in 0..config.max_iterations {
         let (mut bx, mut by) = (0.0f32, 0.0f32);
+        let fast = unwarped && sample_window(j_img, p.x + d.x, p.y + d.y, half, &mut next_patch);
+        if fast {
+            for (s, &jv) in template.iter().zip(&next_patch) {
+                if let Some((t, gx, gy)) = *s {
+                    let e = jv - t;
+                    bx += gx * e;
+                    by += gy * e;
+                }
+            }
+        }
         let mut k = 0;
-        for j in -half..=half {
+        for j in (-half..=half).filter(|_| !fast) {
             for i in -half..=half {
                 let o = linear * Vector2::new(i as f32, j as f32);
                 if let Some((t, gx, gy)) = template[k]
@@ -422,6 +452,40 @@ fn refine_level(
         }
     }
     LevelResult::Refined(d)
+}
+
+/// Bilinear samples of the `(2r + 1)²` window centred at `(x, y)`, row-major, into `out`;
+/// `false` (and `out` unspecified) unless the whole window lies where bilinear sampling is
+/// defined. All samples share one fractional offset, so the weights are computed once.
+fn sample_window(image: &GrayImage, x: f32, y: f32, r: i32, out: &mut Vec<f32>) -> bool {
+    if !(x.is_finite() && y.is_finite()) {
+        return false;
+    }
+    let (xf, yf) = (x.floor(), y.floor());
+    let (fx, fy) = (x - xf, y - yf);
+    let (x0, y0) = (xf as i64 - i64::from(r), yf as i64 - i64::from(r));
+    let side = 2 * i64::from(r) + 1;
+    let (w, h) = (i64::from(image.width()), i64::from(image.height()));
+    if x0 < 0 || y0 < 0 || x0 + side >= w || y0 + side >= h {
+        return false;
+    }
+    let (w00, w10, w01, w11) = (
+        (1.0 - fx) * (1.0 - fy),
+        fx * (1.0 - fy),
+        (1.0 - fx) * fy,
+        fx * fy,
+    );
+    let data = image.as_slice();
+    let stride = w as usize;
+    out.clear();
+    for j in 0..side as usize {
+        let top = &data[(y0 as usize + j) * stride + x0 as usize..][..side as usize + 1];
+        let bottom = &data[(y0 as usize + j + 1) * stride + x0 as usize..][..side as usize + 1];
+        for i in 0..side as usize {
+            out.push(w00 * top[i] + w10 * top[i + 1] + w01 * bottom[i] + w11 * bottom[i + 1]);
+        }
+    }
+    true
 }
 
 /// Mean absolute difference between the window at `p` in `t_img` and at `q` in `j_img`, over

@@ -34,6 +34,9 @@ impl Default for MotionConfig {
     }
 }
 
+/// Point pairs: sources in `prev`, destinations in `next`, px.
+type PointPairs = (Vec<Point2<f64>>, Vec<Point2<f64>>);
+
 /// Tracked pairs (source, destination) in f64.
 fn tracked_pairs(
     points: &[Point2<f32>],
@@ -41,7 +44,7 @@ fn tracked_pairs(
     next: &KltPyramid,
     linear: &Matrix2<f32>,
     klt: &KltConfig,
-) -> Result<(Vec<Point2<f64>>, Vec<Point2<f64>>), FeatureError> {
+) -> Result<PointPairs, FeatureError> {
     let tracks = track_points_warped(prev, next, points, linear, klt)?;
     Ok(points
         .iter()

@@ -1,0 +1,689 @@
+//! The multi-target box tracker: KLT prediction, detection update, association, track life
+//! cycle.
+//!
+//! Each frame, [`Tracker::step`]:
+//! 1. predicts every track with the similarity transform of its box, fitted robustly to the
+//!    pyramidal-LK motion of Harris corners found inside the box in the previous frame
+//!    (identity when too few corners track; see [`TrackerConfig::min_tracked_points`]);
+//! 2. drops tracks whose box left the image (with a margin), collapsed below a minimum size,
+//!    or whose box entropy reached the threshold (no update for a while);
+//! 3. associates detections to tracks greedily by decreasing IoU, at IoU ≥ the threshold, and
+//!    updates the matched tracks;
+//! 4. registers each remaining detection that overlaps no track at the threshold as a new,
+//!    tentative track;
+//! 5. confirms a tentative track once it has `confirm_hits` detections within its first
+//!    `confirm_window_frames` frames, and drops it if it cannot.
+//!
+//! Ids are assigned in registration order and never reused. The result is deterministic: the
+//! only parallel part (KLT over points) does not depend on the thread count.
+
+use nalgebra::{Matrix3, Matrix4, Point2, Vector4};
+use scarp_slam::features::{
+    CornerConfig, CornerRegion, FeatureError, KltPyramid, KltStatus, MotionConfig, PixelRect,
+    Similarity2, detect_corners, track_points, track_similarity,
+};
+use scarp_slam::image::GrayImage;
+use serde::{Deserialize, Serialize};
+
+use super::TrackingError;
+use super::kalman::{BoxEstimate, box_entropy, predict, update};
+use crate::detection::{BoundingBox, Detection};
+
+/// Tracker parameters. Defaults come from the paper and its code (DESIGN.md's table).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TrackerConfig {
+    /// Minimum IoU between a track's predicted box and a detection to associate them. Default
+    /// 0.3 (paper).
+    pub iou_threshold: f64,
+    /// An unassociated detection starts a new track only if its IoU with every track is below
+    /// this. Default 0.3 (the paper uses the association threshold). Lower it (for example to
+    /// 0.05) for small boxes under large detector jitter, where two detections of one object
+    /// often overlap less than 0.3 and would otherwise start duplicate tracks.
+    pub register_iou_threshold: f64,
+    /// Prediction noise `r` of `R = diag(r, r, 0, r, r, 0)`, px². Default 10 (paper).
+    pub prediction_variance_px2: f64,
+    /// Detection noise `q` of `Q = q·I₄`, px²; also the initial variance of a new track.
+    /// Default 0.2 (paper). Set it to the detector's jitter variance (σ²) for noisy detectors.
+    pub detection_variance_px2: f64,
+    /// Drop a track when its box entropy `h` reaches this, nats. Default 16 (paper). With the
+    /// default noises a track that stops being detected is dropped after 18 frames.
+    pub max_entropy: f64,
+    /// Drop a track whose predicted box comes closer than this to the image border, and do
+    /// not start tracks from such detections, px. Default 5 (paper).
+    pub border_margin_px: f64,
+    /// Drop a track whose box becomes narrower or shorter than this, px (a collapsed box no
+    /// longer covers an object). Default 4.
+    pub min_box_px: f64,
+    /// Detections scoring below this are ignored. Default 0 (keep all).
+    pub min_detection_score: f32,
+    /// Detections needed to confirm a new track. Default 3.
+    pub confirm_hits: u32,
+    /// ... within this many frames from its first detection (inclusive), otherwise the track
+    /// is dropped as false. Default 5 (a quarter second at 20 Hz).
+    pub confirm_window_frames: u32,
+    /// Fewest inlier corners for a similarity fit; with fewer the box is predicted by the
+    /// median corner shift (≥ 1 tracked corner) or kept in place. Default 3.
+    pub min_tracked_points: usize,
+    /// Reject a similarity whose scale changes by more than this fraction per frame (keeping
+    /// only its translation). Default 0.2.
+    pub max_scale_change: f64,
+    /// Corner detection in each box. Defaults: Harris, at most 20 corners (paper: 15–20).
+    pub corners: CornerConfig,
+    /// Box motion: pyramidal LK (defaults: 25 px window, 15 iterations as in the paper, 4
+    /// levels, forward–backward check), robust similarity fit, and refinement passes (default
+    /// 0 here: box motion needs a few tenths of a pixel, not hundredths, and a pass doubles the
+    /// KLT cost).
+    pub motion: MotionConfig,
+}
+
+impl Default for TrackerConfig {
+    fn default() -> Self {
+        Self {
+            iou_threshold: 0.3,
+            register_iou_threshold: 0.3,
+            prediction_variance_px2: 10.0,
+            detection_variance_px2: 0.2,
+            max_entropy: 16.0,
+            border_margin_px: 5.0,
+            min_box_px: 4.0,
+            min_detection_score: 0.0,
+            confirm_hits: 3,
+            confirm_window_frames: 5,
+            min_tracked_points: 3,
+            max_scale_change: 0.2,
+            corners: CornerConfig {
+                min_distance_px: 2.0,
+                ..CornerConfig::default()
+            },
+            motion: MotionConfig {
+                refinement_passes: 0,
+                ..MotionConfig::default()
+            },
+        }
+    }
+}
+
+impl TrackerConfig {
+    /// Checks the ranges.
+    ///
+    /// # Errors
+    /// [`TrackingError::InvalidConfig`] naming the field.
+    pub fn validate(&self) -> Result<(), TrackingError> {
+        let bad = |field: &'static str, reason: &'static str| {
+            Err(TrackingError::InvalidConfig { field, reason })
+        };
+        if !(self.iou_threshold > 0.0 && self.iou_threshold <= 1.0) {
+            return bad("iou_threshold", "must be in (0, 1]");
+        }
+        if !(self.prediction_variance_px2.is_finite() && self.prediction_variance_px2 > 0.0) {
+            return bad("prediction_variance_px2", "must be finite and > 0");
+        }
+        if !(self.detection_variance_px2.is_finite() && self.detection_variance_px2 > 0.0) {
+            return bad("detection_variance_px2", "must be finite and > 0");
+        }
+        if !(self.register_iou_threshold > 0.0 && self.register_iou_threshold <= 1.0) {
+            return bad("register_iou_threshold", "must be in (0, 1]");
+        }
+        if !self.max_entropy.is_finite() {
+            return bad("max_entropy", "must be finite");
+        }
+        if !(self.border_margin_px.is_finite() && self.border_margin_px >= 0.0) {
+            return bad("border_margin_px", "must be finite and ≥ 0");
+        }
+        if !(self.min_box_px.is_finite() && self.min_box_px >= 0.0) {
+            return bad("min_box_px", "must be finite and ≥ 0");
+        }
+        if !self.min_detection_score.is_finite() {
+            return bad("min_detection_score", "must be finite");
+        }
+        if self.confirm_hits == 0 {
+            return bad("confirm_hits", "must be at least 1");
+        }
+        if self.confirm_window_frames < self.confirm_hits {
+            return bad("confirm_window_frames", "must be at least confirm_hits");
+        }
+        if !(self.max_scale_change.is_finite() && self.max_scale_change > 0.0) {
+            return bad("max_scale_change", "must be finite and > 0");
+        }
+        let feature = |e: FeatureError| TrackingError::Feature(e);
+        self.corners.validate().map_err(feature)?;
+        self.motion.klt.validate().map_err(feature)?;
+        Ok(())
+    }
+}
+
+/// One live track as reported after a step.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct TrackedBox {
+    /// Stable id, unique for the tracker's lifetime (starting at 1).
+    pub id: u64,
+    /// The filtered box, px.
+    pub bbox: BoundingBox,
+    /// Whether the track passed the confirmation rule (only confirmed tracks should be used).
+    pub confirmed: bool,
+    /// Frames since the track was registered (0 on its first frame).
+    pub age: u32,
+    /// Detections associated so far, including the one that registered it.
+    pub hits: u32,
+    /// Whether a detection updated the track in this step.
+    pub updated: bool,
+    /// Box entropy `h`, nats.
+    pub entropy: f64,
+    /// Class of the detection that registered the track.
+    pub class_id: u32,
+}
+
+#[derive(Debug, Clone)]
+struct Track {
+    id: u64,
+    estimate: BoxEstimate,
+    confirmed: bool,
+    age: u32,
+    hits: u32,
+    updated: bool,
+    class_id: u32,
+}
+
+impl Track {
+    fn bbox(&self) -> BoundingBox {
+        bbox_from_state(&self.estimate.state_px)
+    }
+
+    fn report(&self) -> TrackedBox {
+        TrackedBox {
+            id: self.id,
+            bbox: self.bbox(),
+            confirmed: self.confirmed,
+            age: self.age,
+            hits: self.hits,
+            updated: self.updated,
+            entropy: box_entropy(&self.estimate.covariance_px2),
+            class_id: self.class_id,
+        }
+    }
+}
+
+fn bbox_from_state(u: &Vector4<f64>) -> BoundingBox {
+    BoundingBox {
+        x_min: u[0],
+        y_min: u[1],
+        x_max: u[2],
+        y_max: u[3],
+    }
+}
+
+fn state_from_bbox(b: &BoundingBox) -> Vector4<f64> {
+    Vector4::new(b.x_min, b.y_min, b.x_max, b.y_max)
+}
+
+/// The bounding-box tracker. Feed it one frame at a time with [`Tracker::step`].
+#[derive(Debug, Clone)]
+pub struct Tracker {
+    config: TrackerConfig,
+    tracks: Vec<Track>,
+    next_id: u64,
+    previous: Option<KltPyramid>,
+}
+
+impl Tracker {
+    /// A tracker with no tracks.
+    ///
+    /// # Errors
+    /// [`TrackingError::InvalidConfig`] or [`TrackingError::Feature`] for a bad config.
+    pub fn new(config: TrackerConfig) -> Result<Self, TrackingError> {
+        config.validate()?;
+        Ok(Self {
+            config,
+            tracks: Vec::new(),
+            next_id: 1,
+            previous: None,
+        })
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &TrackerConfig {
+        &self.config
+    }
+
+    /// The live tracks (confirmed and tentative), in registration order.
+    pub fn tracks(&self) -> Vec<TrackedBox> {
+        self.tracks.iter().map(Track::report).collect()
+    }
+
+    /// Processes one frame: `frame_gray` is the intensity image the detections were made on,
+    /// `detections` its detections (any order). Returns the live tracks after the step,
+    /// confirmed and tentative, in registration order.
+    ///
+    /// # Errors
+    /// [`TrackingError::FrameSize`] when the frame's size differs from the previous frame's;
+    /// [`TrackingError::InvalidDetection`] for a detection with a non-finite or empty box.
+    pub fn step(
+        &mut self,
+        frame_gray: &GrayImage,
+        detections: &[Detection],
+    ) -> Result<Vec<TrackedBox>, TrackingError> {
+        let (width, height) = (frame_gray.width(), frame_gray.height());
+        for (index, d) in detections.iter().enumerate() {
+            let b = d.bbox;
+            if BoundingBox::new(b.x_min, b.y_min, b.x_max, b.y_max).is_err() {
+                return Err(TrackingError::InvalidDetection { index });
+            }
+        }
+        let pyramid = KltPyramid::new(frame_gray, self.config.motion.klt.pyramid_levels);
+        if let Some(prev) = &self.previous
+            && prev.size() != (width, height)
+        {
+            let (pw, ph) = prev.size();
+            return Err(TrackingError::FrameSize {
+                expected_width: pw,
+                expected_height: ph,
+                width,
+                height,
+            });
+        }
+
+        // 1. Predict.
+        let motions = match &self.previous {
+            Some(prev) => self.box_motions(prev, &pyramid)?,
+            None => vec![Matrix3::identity(); self.tracks.len()],
+        };
+        for (track, s) in self.tracks.iter_mut().zip(&motions) {
+            track.estimate = predict(&track.estimate, s, self.config.prediction_variance_px2);
+            track.age += 1;
+            track.updated = false;
+        }
+
+        // 2. Drop tracks that left the image or grew too uncertain.
+        let margin = self.config.border_margin_px;
+        let max_entropy = self.config.max_entropy;
+        let min_size = self.config.min_box_px.max(f64::MIN_POSITIVE);
+        self.tracks.retain(|t| {
+            let b = t.bbox();
+            b.width() >= min_size
+                && b.height() >= min_size
+                && b.is_inside_image(width, height, margin)
+                && box_entropy(&t.estimate.covariance_px2) < max_entropy
+        });
+
+        // 3. Associate and update.
+        let usable: Vec<&Detection> = detections
+            .iter()
+            .filter(|d| d.score >= self.config.min_detection_score)
+            .collect();
+        let boxes: Vec<BoundingBox> = self.tracks.iter().map(Track::bbox).collect();
+        let pairs = greedy_matches(&boxes, &usable, self.config.iou_threshold);
+        let mut detection_used = vec![false; usable.len()];
+        for &(ti, di) in &pairs {
+            let z = state_from_bbox(&usable[di].bbox);
+            let track = &mut self.tracks[ti];
+            // Σ is positive definite and q > 0 (validated), so Σ + Q is invertible; keep the
+            // prediction if rounding ever says otherwise.
+            if let Some(est) = update(&track.estimate, &z, self.config.detection_variance_px2) {
+                track.estimate = est;
+            }
+            track.hits += 1;
+            track.updated = true;
+            detection_used[di] = true;
+        }
+
+        // 4. Register new tracks from detections that overlap no track.
+        for (di, d) in usable.iter().enumerate() {
+            if detection_used[di] || !d.bbox.is_inside_image(width, height, margin) {
+                continue;
+            }
+            let overlaps = self
+                .tracks
+                .iter()
+                .any(|t| t.bbox().iou(&d.bbox) >= self.config.register_iou_threshold);
+            if overlaps {
+                continue;
+            }
+            self.tracks.push(Track {
+                id: self.next_id,
+                estimate: BoxEstimate {
+                    state_px: state_from_bbox(&d.bbox),
+                    covariance_px2: Matrix4::identity() * self.config.detection_variance_px2,
+                },
+                confirmed: self.config.confirm_hits <= 1,
+                age: 0,
+                hits: 1,
+                updated: true,
+                class_id: d.class_id,
+            });
+            self.next_id += 1;
+        }
+
+        // 5. Confirm, or drop tentative tracks that can no longer be confirmed.
+        let (hits_needed, window) = (self.config.confirm_hits, self.config.confirm_window_frames);
+        for t in &mut self.tracks {
+            if !t.confirmed && t.hits >= hits_needed && t.age < window {
+                t.confirmed = true;
+            }
+        }
+        self.tracks.retain(|t| {
+            if t.confirmed {
+                return true;
+            }
+            // Frames left in the window (this one included in `age`).
+            let remaining = window.saturating_sub(t.age + 1);
+            t.hits + remaining >= hits_needed
+        });
+
+        self.previous = Some(pyramid);
+        Ok(self.tracks())
+    }
+
+    /// The homogeneous similarity `next_from_prev` of every track's box.
+    fn box_motions(
+        &self,
+        prev: &KltPyramid,
+        next: &KltPyramid,
+    ) -> Result<Vec<Matrix3<f64>>, TrackingError> {
+        let (w, h) = prev.size();
+        let mut motions = Vec::with_capacity(self.tracks.len());
+        for t in &self.tracks {
+            let b = t.bbox();
+            let points: Vec<Point2<f32>> =
+                match PixelRect::from_continuous(b.x_min, b.y_min, b.x_max, b.y_max, w, h) {
+                    Some(rect) => detect_corners(
+                        prev.base(),
+                        &self.config.corners,
+                        &CornerRegion::Rect(rect),
+                    )?
+                    .iter()
+                    .map(|c| c.position)
+                    .collect(),
+                    None => Vec::new(),
+                };
+            motions.push(self.box_motion(prev, next, &points)?.matrix());
+        }
+        Ok(motions)
+    }
+
+    /// The motion of one box's corners: a robust similarity when enough corners agree, else
+    /// their median shift, else the identity.
+    fn box_motion(
+        &self,
+        prev: &KltPyramid,
+        next: &KltPyramid,
+        points: &[Point2<f32>],
+    ) -> Result<Similarity2, TrackingError> {
+        if points.is_empty() {
+            return Ok(Similarity2::identity());
+        }
+        if points.len() >= self.config.min_tracked_points {
+            match track_similarity(prev, next, points, &self.config.motion) {
+                Ok(fit)
+                    if fit.inlier_count() >= self.config.min_tracked_points
+                        && (fit.transform.scale() - 1.0).abs() <= self.config.max_scale_change
+                        && fit.transform.is_finite() =>
+                {
+                    return Ok(fit.transform);
+                }
+                // Too few points tracked or agreed: fall back to the median shift.
+                Ok(_) | Err(FeatureError::TooFewPoints { .. } | FeatureError::Degenerate(_)) => {}
+                Err(e) => return Err(e.into()),
+            }
+        }
+        let tracks = track_points(prev, next, points, &self.config.motion.klt)?;
+        let (mut dx, mut dy): (Vec<f64>, Vec<f64>) = points
+            .iter()
+            .zip(&tracks)
+            .filter(|(_, t)| t.status == KltStatus::Tracked)
+            .map(|(p, t)| (f64::from(t.position.x - p.x), f64::from(t.position.y - p.y)))
+            .unzip();
+        if dx.is_empty() {
+            return Ok(Similarity2::identity());
+        }
+        Ok(Similarity2::from_translation(nalgebra::Vector2::new(
+            median(&mut dx),
+            median(&mut dy),
+        )))
+    }
+}
+
+/// Median of a non-empty slice (mean of the two middle values for even lengths).
+fn median(values: &mut [f64]) -> f64 {
+    values.sort_by(f64::total_cmp);
+    let n = values.len();
+    if n == 0 {
+        0.0
+    } else if n % 2 == 1 {
+        values[n / 2]
+    } else {
+        0.5 * (values[n / 2 - 1] + values[n / 2])
+    }
+}
+
+/// Greedy one-to-one matching of tracks to detections by decreasing IoU, keeping pairs with
+/// IoU ≥ `threshold`. Ties go to the lower track index, then the lower detection index.
+fn greedy_matches(
+    tracks: &[BoundingBox],
+    detections: &[&Detection],
+    threshold: f64,
+) -> Vec<(usize, usize)> {
+    let mut candidates: Vec<(f64, usize, usize)> = Vec::new();
+    for (ti, t) in tracks.iter().enumerate() {
+        for (di, d) in detections.iter().enumerate() {
+            let iou = t.iou(&d.bbox);
+            if iou >= threshold {
+                candidates.push((iou, ti, di));
+            }
+        }
+    }
+    candidates.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2)));
+    let (mut t_used, mut d_used) = (vec![false; tracks.len()], vec![false; detections.len()]);
+    let mut out = Vec::new();
+    for (_, ti, di) in candidates {
+        if !t_used[ti] && !d_used[di] {
+            t_used[ti] = true;
+            d_used[di] = true;
+            out.push((ti, di));
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Broadband plane-wave texture (wavelengths 13–160 px).
+    fn texture(x: f32, y: f32) -> f32 {
+        let waves = [
+            (0.3f32, 160.0f32, 0.12f32, 0.0f32),
+            (1.9, 110.0, 0.10, 1.1),
+            (2.7, 70.0, 0.08, 2.3),
+            (0.9, 45.0, 0.06, 0.7),
+            (2.2, 30.0, 0.05, 1.9),
+            (1.3, 20.0, 0.04, 2.9),
+            (0.1, 13.0, 0.03, 0.4),
+        ];
+        0.5 + waves
+            .iter()
+            .map(|&(dir, lambda, amp, phase)| {
+                let k = std::f32::consts::TAU / lambda;
+                amp * (k * (dir.cos() * x + dir.sin() * y) + phase).sin()
+            })
+            .sum::<f32>()
+    }
+
+    /// The scene shifted by `(dx, dy)`: content at x in frame 0 appears at x + (dx, dy).
+    fn frame(dx: f32, dy: f32) -> GrayImage {
+        let (w, h) = (320u32, 240u32);
+        let data = (0..w * h)
+            .map(|i| texture((i % w) as f32 - dx, (i / w) as f32 - dy))
+            .collect();
+        GrayImage::from_vec(w, h, data).unwrap()
+    }
+
+    fn detection(b: BoundingBox) -> Detection {
+        Detection {
+            bbox: b,
+            score: 0.9,
+            class_id: 0,
+        }
+    }
+
+    /// Deterministic pseudo-random jitter in [−amp, amp].
+    fn jitter(k: u32, amp: f64) -> f64 {
+        let h = k.wrapping_mul(2_654_435_761).rotate_left(13) ^ 0x9e37_79b9;
+        (f64::from(h % 2001) / 1000.0 - 1.0) * amp
+    }
+
+    fn shifted(b: &BoundingBox, dx: f64, dy: f64) -> BoundingBox {
+        BoundingBox::new(b.x_min + dx, b.y_min + dy, b.x_max + dx, b.y_max + dy).unwrap()
+    }
+
+    #[test]
+    fn ids_stay_stable_and_boxes_follow_a_moving_scene() {
+        let mut tracker = Tracker::new(TrackerConfig {
+            detection_variance_px2: 4.0,
+            prediction_variance_px2: 1.0,
+            ..TrackerConfig::default()
+        })
+        .unwrap();
+        let a0 = BoundingBox::new(60.0, 60.0, 110.0, 100.0).unwrap();
+        let b0 = BoundingBox::new(170.0, 120.0, 210.0, 170.0).unwrap();
+        let (vx, vy) = (2.5f32, 1.25f32);
+        let mut ids = Vec::new();
+        for k in 0..30u32 {
+            let (dx, dy) = (vx * k as f32, vy * k as f32);
+            let img = frame(dx, dy);
+            let (a, b) = (
+                shifted(&a0, dx.into(), dy.into()),
+                shifted(&b0, dx.into(), dy.into()),
+            );
+            let mut dets = Vec::new();
+            // Target A is missed every fourth frame; B every fifth.
+            if k % 4 != 3 {
+                dets.push(detection(shifted(&a, jitter(k, 2.0), jitter(k + 100, 2.0))));
+            }
+            if k % 5 != 4 {
+                dets.push(detection(shifted(
+                    &b,
+                    jitter(k + 7, 2.0),
+                    jitter(k + 50, 2.0),
+                )));
+            }
+            let out = tracker.step(&img, &dets).unwrap();
+            if k >= 3 {
+                assert_eq!(out.len(), 2, "frame {k}: {out:?}");
+                assert!(out.iter().all(|t| t.confirmed));
+                ids.push((out[0].id, out[1].id));
+                // The filtered boxes stay on the true ones, misses included.
+                assert!(
+                    out[0].bbox.iou(&a) > 0.8,
+                    "frame {k}: {:?} vs {a:?}",
+                    out[0]
+                );
+                assert!(
+                    out[1].bbox.iou(&b) > 0.8,
+                    "frame {k}: {:?} vs {b:?}",
+                    out[1]
+                );
+            }
+        }
+        assert!(ids.iter().all(|&p| p == (1, 2)), "{ids:?}");
+    }
+
+    #[test]
+    fn prediction_follows_the_scene_without_detections() {
+        let mut tracker = Tracker::new(TrackerConfig::default()).unwrap();
+        let box0 = BoundingBox::new(100.0, 80.0, 150.0, 130.0).unwrap();
+        for k in 0..3 {
+            tracker.step(&frame(0.0, 0.0), &[detection(box0)]).unwrap();
+            assert_eq!(tracker.tracks()[0].hits, k + 1);
+        }
+        // The scene moves 6 px right and 3 px down per frame; no detections for 5 frames.
+        for k in 1..=5 {
+            let out = tracker
+                .step(&frame(6.0 * k as f32, 3.0 * k as f32), &[])
+                .unwrap();
+            let truth = shifted(&box0, 6.0 * f64::from(k), 3.0 * f64::from(k));
+            assert_eq!(out.len(), 1);
+            assert!(!out[0].updated);
+            assert!(
+                out[0].bbox.iou(&truth) > 0.95,
+                "{:?} vs {truth:?}",
+                out[0].bbox
+            );
+        }
+    }
+
+    #[test]
+    fn false_detections_die_tentative_and_lost_tracks_die_by_entropy() {
+        let mut tracker = Tracker::new(TrackerConfig::default()).unwrap();
+        let img = frame(0.0, 0.0);
+        let target = BoundingBox::new(100.0, 80.0, 150.0, 130.0).unwrap();
+        let ghost = BoundingBox::new(220.0, 150.0, 250.0, 180.0).unwrap();
+        // The ghost is detected on frames 0 and 4 only: never 3 hits within 5 frames.
+        for k in 0..10 {
+            let mut dets = vec![detection(target)];
+            if k == 0 || k == 4 {
+                dets.push(detection(ghost));
+            }
+            let out = tracker.step(&img, &dets).unwrap();
+            assert!(out.iter().all(|t| t.id == 1 || !t.confirmed), "{out:?}");
+        }
+        assert_eq!(tracker.tracks().len(), 1);
+        // The target stops being detected: it goes after 18 predictions (h ≥ 16).
+        let mut frames_alive = 0;
+        while !tracker.step(&img, &[]).unwrap().is_empty() {
+            frames_alive += 1;
+            assert!(frames_alive < 100);
+        }
+        assert_eq!(frames_alive, 17);
+        // A new detection gets a fresh id: ids are never reused.
+        let out = tracker.step(&img, &[detection(target)]).unwrap();
+        assert!(out[0].id > 2);
+    }
+
+    #[test]
+    fn boxes_leaving_the_image_are_dropped_and_bad_input_is_rejected() {
+        let mut tracker = Tracker::new(TrackerConfig::default()).unwrap();
+        let img = frame(0.0, 0.0);
+        let near_edge = BoundingBox::new(2.0, 50.0, 40.0, 90.0).unwrap();
+        // Too close to the border to start a track.
+        assert!(
+            tracker
+                .step(&img, &[detection(near_edge)])
+                .unwrap()
+                .is_empty()
+        );
+        let inside = BoundingBox::new(10.0, 50.0, 48.0, 90.0).unwrap();
+        tracker.step(&img, &[detection(inside)]).unwrap();
+        assert_eq!(tracker.tracks().len(), 1);
+        // The scene moves left by 8 px: the box's prediction crosses the margin.
+        let out = tracker.step(&frame(-8.0, 0.0), &[]).unwrap();
+        assert!(out.is_empty(), "{out:?}");
+        let bad = Detection {
+            bbox: BoundingBox {
+                x_min: f64::NAN,
+                ..inside
+            },
+            score: 1.0,
+            class_id: 0,
+        };
+        assert_eq!(
+            tracker.step(&img, &[bad]),
+            Err(TrackingError::InvalidDetection { index: 0 })
+        );
+        assert!(matches!(
+            tracker.step(&GrayImage::filled(10, 10, 0.0), &[]),
+            Err(TrackingError::FrameSize { .. })
+        ));
+        let config = TrackerConfig {
+            confirm_window_frames: 1,
+            ..TrackerConfig::default()
+        };
+        assert!(matches!(
+            Tracker::new(config),
+            Err(TrackingError::InvalidConfig {
+                field: "confirm_window_frames",
+                ..
+            })
+        ));
+    }
+}
