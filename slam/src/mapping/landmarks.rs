@@ -48,6 +48,9 @@ pub struct LandmarkConfig {
     pub close_loop: bool,
     /// Loop merging joins tracks that land within this distance, pixels. Default 1.5.
     pub loop_merge_px: f64,
+    /// New corners need valid depths within this many pixels around them, all within twice
+    /// `max_depth_spread_ratio` of the corner's own (no silhouettes). Default 4.
+    pub silhouette_radius_px: u32,
     /// A depth is used (for initialisation and as a depth residual) only where the four pixels
     /// around the corner agree within this fraction of their mean. Default 0.02.
     pub max_depth_spread_ratio: f64,
@@ -67,6 +70,7 @@ impl Default for LandmarkConfig {
             max_prediction_error_px: 4.0,
             roi_margin_m: 0.3,
             close_loop: true,
+            silhouette_radius_px: 4,
             loop_merge_px: 1.5,
             max_depth_spread_ratio: 0.02,
         }
@@ -249,6 +253,16 @@ fn start_tracks(
         let Some(depth) = depth_at(view.depth_m, &pixel, config.max_depth_spread_ratio) else {
             continue;
         };
+        // Corners on silhouettes (T-junctions of two surfaces) move with the view: keep only
+        // corners on a surface that is continuous around them.
+        if !depth_is_smooth(
+            view.depth_m,
+            &pixel,
+            config.silhouette_radius_px,
+            config.max_depth_spread_ratio * 2.0,
+        ) {
+            continue;
+        }
         let world = view.world_from_camera * camera.unproject(&Point2::from(pixel), depth);
         if let Some(roi) = roi
             && !inside_grown(roi, &world, config.roi_margin_m)
@@ -311,6 +325,42 @@ pub fn depth_at(depth_m: &DepthImage, pixel: &Vector2<f64>, max_spread_ratio: f6
     let top = values[0] * (1.0 - fu) + values[1] * fu;
     let bottom = values[2] * (1.0 - fu) + values[3] * fu;
     Some(top * (1.0 - fv) + bottom * fv)
+}
+
+/// Whether every depth within `radius_px` (a square window) of `pixel` is valid and within
+/// `max_spread_ratio` of the centre pixel's depth.
+fn depth_is_smooth(
+    depth_m: &DepthImage,
+    pixel: &Vector2<f64>,
+    radius_px: u32,
+    max_spread_ratio: f64,
+) -> bool {
+    let (u, v) = (pixel.x.round() as i64, pixel.y.round() as i64);
+    let r = i64::from(radius_px);
+    let Some(&centre) = u32::try_from(u)
+        .ok()
+        .zip(u32::try_from(v).ok())
+        .and_then(|(u, v)| depth_m.get(u, v))
+    else {
+        return false;
+    };
+    let centre = f64::from(centre);
+    for dv in -r..=r {
+        for du in -r..=r {
+            let (x, y) = (u + du, v + dv);
+            let Some(&d) = u32::try_from(x)
+                .ok()
+                .zip(u32::try_from(y).ok())
+                .and_then(|(x, y)| depth_m.get(x, y))
+            else {
+                return false;
+            };
+            if !(d > 0.0 && (f64::from(d) - centre).abs() <= max_spread_ratio * centre) {
+                return false;
+            }
+        }
+    }
+    true
 }
 
 /// Whether `p` lies inside `roi` grown by `margin_m` on every side.
