@@ -170,14 +170,14 @@ struct StoredKeyframes {
 }
 
 /// Runs [`refine_keyframes`] and adds its figures (and, with ground truth, the before/after
-/// ATE and F-scores) to `extra`; returns the refined mesh.
+/// ATE and F-scores) to `extra`; returns the refined mesh and its meshing time (ms).
 fn refine(
     args: &MapArgs,
     seq: &Sequence,
     tsdf: TsdfConfig,
     keyframes: &StoredKeyframes,
     extra: &mut serde_json::Map<String, serde_json::Value>,
-) -> anyhow::Result<TriangleMesh> {
+) -> anyhow::Result<(TriangleMesh, f64)> {
     let base = match &args.ba_config {
         Some(path) => {
             let text = std::fs::read_to_string(path)
@@ -289,7 +289,7 @@ fn refine(
         extra.insert("fscore_tau_m".into(), args.tau.into());
         extra.insert("fscore_rock_id".into(), rock.id.into());
     }
-    Ok(refined.mesh)
+    Ok((refined.mesh, refined.mesh_ms))
 }
 
 /// Fuses every frame at its `groundtruth.txt` or `estimate.txt` pose; returns the volume and
@@ -473,20 +473,22 @@ fn finish(
     volume: &TsdfVolume,
     mut integrate_ms: Vec<f64>,
     extra: serde_json::Map<String, serde_json::Value>,
-    refined_mesh: Option<TriangleMesh>,
+    refined_mesh: Option<(TriangleMesh, f64)>,
 ) -> anyhow::Result<()> {
     let start = Instant::now();
-    let mesh = match refined_mesh {
-        Some(mesh) => mesh,
-        None => extract_mesh(
-            volume,
-            &MeshingConfig {
-                min_weight: args.min_weight,
-                min_component_triangles: args.min_component_triangles,
-            },
-        ),
+    let (mesh, mesh_ms) = match refined_mesh {
+        Some(refined) => refined,
+        None => {
+            let mesh = extract_mesh(
+                volume,
+                &MeshingConfig {
+                    min_weight: args.min_weight,
+                    min_component_triangles: args.min_component_triangles,
+                },
+            );
+            (mesh, start.elapsed().as_secs_f64() * 1e3)
+        }
     };
-    let mesh_ms = start.elapsed().as_secs_f64() * 1e3;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
     write_mesh(
