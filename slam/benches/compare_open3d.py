@@ -1,13 +1,20 @@
 #!/usr/bin/env python3
-"""Open3D VoxelBlockGrid on the same frames as `scarp map`, for the TSDF speed comparison.
+"""Open3D VoxelBlockGrid and RGBD odometry on the same frames as `scarp map`, for the speed comparison.
 
-Same voxel size, truncation (4 voxels), block resolution (8) and depth range; ground-truth poses.
+TSDF: same voxel size, truncation (4 voxels), block resolution (8) and depth range; ground-truth
+poses. Odometry (with --odometry-pairs N): Open3D's hybrid RGBD odometry (t.pipelines.odometry,
+Method.Hybrid, 3 levels) on the first N consecutive frame pairs, initialised with the state
+estimate's relative motion as scarp is; its per-pair time and its ATE over those frames (chained,
+SE(3)-aligned like `scarp eval traj`) are printed next to scarp's figures read from a map.json
+(--scarp-map DIR/map.json from `scarp map --poses odometry`).
 
 Setup (Debian):  apt-get install libusb-1.0-0 libgomp1
                  pip install open3d-cpu==0.19.0   (0.20's CPU wheel gives empty TSDF meshes)
 Usage:           scarp render --path orbit --frames 120 --no-noise --out /tmp/orbit
                  python3 slam/benches/compare_open3d.py /tmp/orbit --voxel 0.01 [--frames N]
                  scarp map /tmp/orbit --poses groundtruth --voxel 0.01 --out /tmp/map --json
+                 python3 slam/benches/compare_open3d.py /tmp/orbit --frames 0 --odometry-pairs 30 \
+                     --scarp-map /tmp/map_odometry/map.json
 
 Prints the median and p90 integration time per frame (block allocation + integration, as
 `integrate_ms_*` in scarp's map.json), the meshing time and the triangle count as JSON.
@@ -61,9 +68,86 @@ def main():
     parser.add_argument("sequence", type=Path)
     parser.add_argument("--voxel", type=float, default=0.01)
     parser.add_argument("--max-depth", type=float, default=10.0)
-    parser.add_argument("--frames", type=int, default=0, help="0 = all")
+    parser.add_argument("--frames", type=int, default=0, help="0 = all (TSDF); -1 skips it")
+    parser.add_argument("--odometry-pairs", type=int, default=0, help="frame pairs for odometry")
+    parser.add_argument("--scarp-map", type=Path, help="scarp's map.json to print beside")
     args = parser.parse_args()
+    result = {"open3d": o3d.__version__}
+    if args.frames >= 0:
+        result.update(compare_tsdf(args))
+    if args.odometry_pairs > 0:
+        result.update(compare_odometry(args))
+    if args.scarp_map:
+        ours = json.loads(args.scarp_map.read_text())
+        keys = ["integrate_ms_median", "integrate_ms_p90", "mesh_ms", "triangles",
+                "odometry_ms_median", "ate_rmse_m", "estimate_ate_rmse_m"]
+        result["scarp"] = {k: ours[k] for k in keys if k in ours}
+    print(json.dumps(result, indent=2))
 
+
+def read_poses(path):
+    return [np.linalg.inv(camera_from_world(*map(float, row[1:8]))) for row in read_list(path)]
+
+
+def ate_rmse(estimate, truth):
+    """ATE RMSE of camera positions after a least-squares SE(3) alignment (Horn/Umeyama)."""
+    x = np.array([p[:3, 3] for p in estimate])
+    y = np.array([p[:3, 3] for p in truth])
+    mx, my = x.mean(0), y.mean(0)
+    u, _, vt = np.linalg.svd((y - my).T @ (x - mx))
+    d = np.diag([1, 1, np.sign(np.linalg.det(u @ vt))])
+    r = u @ d @ vt
+    aligned = (r @ (x - mx).T).T + my
+    return float(np.sqrt(((aligned - y) ** 2).sum(1).mean()))
+
+
+def compare_odometry(args):
+    seq = args.sequence
+    cam = parse_camera(seq / "camera.toml")
+    intrinsic = o3c.Tensor(
+        [[cam["fx"], 0, cam["cx"]], [0, cam["fy"], cam["cy"]], [0, 0, 1]], o3c.float64
+    )
+    rgb = read_list(seq / "rgb.txt")
+    depth = read_list(seq / "depth.txt")
+    truth = read_poses(seq / "groundtruth.txt")
+    estimate = read_poses(seq / "estimate.txt")
+    n = min(args.odometry_pairs + 1, len(depth))
+
+    def load(i):
+        image = o3d.t.geometry.RGBDImage(
+            o3d.t.io.read_image(str(seq / rgb[i][1])).to(o3c.float32, scale=1.0 / 255.0),
+            o3d.t.io.read_image(str(seq / depth[i][1])),
+        )
+        return image
+
+    times_ms = []
+    chained = [estimate[0]]
+    previous = load(0)
+    for i in range(1, n):
+        current = load(i)
+        # source = current, target = previous: the result maps current-camera points into the
+        # previous camera (previous_from_current), initialised with the estimator's motion.
+        guess = np.linalg.inv(estimate[i - 1]) @ estimate[i]
+        start = time.perf_counter()
+        result = o3d.t.pipelines.odometry.rgbd_odometry_multi_scale(
+            current, previous, intrinsic, o3c.Tensor(guess, o3c.float64),
+            cam["depth_scale"], args.max_depth,
+            [o3d.t.pipelines.odometry.OdometryConvergenceCriteria(k) for k in (10, 5, 3)],
+            o3d.t.pipelines.odometry.Method.Hybrid,
+        )
+        times_ms.append((time.perf_counter() - start) * 1e3)
+        chained.append(chained[-1] @ result.transformation.numpy())
+        previous = current
+    times_ms.sort()
+    return {
+        "odometry_pairs": n - 1,
+        "odometry_ms_median": statistics.median(times_ms),
+        "odometry_ate_rmse_m": ate_rmse(chained, truth[:n]),
+        "estimate_ate_rmse_m": ate_rmse(estimate[:n], truth[:n]),
+    }
+
+
+def compare_tsdf(args):
     seq = args.sequence
     cam = parse_camera(seq / "camera.toml")
     intrinsic = o3c.Tensor(
@@ -101,19 +185,13 @@ def main():
     mesh = vbg.extract_triangle_mesh()
     mesh_ms = (time.perf_counter() - start) * 1e3
     times_ms.sort()
-    print(
-        json.dumps(
-            {
-                "open3d": o3d.__version__,
-                "frames": n,
-                "integrate_ms_median": statistics.median(times_ms),
-                "integrate_ms_p90": times_ms[min(len(times_ms) - 1, int(0.9 * (len(times_ms) - 1) + 0.5))],
-                "mesh_ms": mesh_ms,
-                "triangles": int(mesh.triangle.indices.shape[0]),
-            },
-            indent=2,
-        )
-    )
+    return {
+        "frames": n,
+        "integrate_ms_median": statistics.median(times_ms),
+        "integrate_ms_p90": times_ms[min(len(times_ms) - 1, int(0.9 * (len(times_ms) - 1) + 0.5))],
+        "mesh_ms": mesh_ms,
+        "triangles": int(mesh.triangle.indices.shape[0]),
+    }
 
 
 if __name__ == "__main__":

@@ -3,8 +3,9 @@
 //! The geometry core and mapping engine of scarp: pinhole cameras, rigid transforms, RGBD frames,
 //! image pyramids, triangle meshes and point clouds; RGBD odometry ([`odometry`]) and keyframe
 //! selection ([`keyframes`]); voxel-hashed TSDF fusion and raycasting ([`tsdf`]) and
-//! marching-cubes meshing ([`meshing`]). Later stages (features, bundle adjustment) build on
-//! these.
+//! marching-cubes meshing ([`meshing`]); corners and KLT ([`features`]); bundle adjustment
+//! ([`ba`]); and the mapping pipeline that ties them together ([`mapping`]: frame-to-model or
+//! frame-to-keyframe tracking with fusion, KLT landmarks, keyframe refinement).
 //!
 //! Conventions, which every public item follows:
 //! - World is local ENU (x east, y north, z up), in metres.

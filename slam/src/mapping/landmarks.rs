@@ -48,6 +48,9 @@ pub struct LandmarkConfig {
     pub close_loop: bool,
     /// Loop merging joins tracks that land within this distance, pixels. Default 1.5.
     pub loop_merge_px: f64,
+    /// New corners need valid depths within this many pixels around them, all within twice
+    /// `max_depth_spread_ratio` of the corner's own (no silhouettes). Default 4.
+    pub silhouette_radius_px: u32,
     /// A depth is used (for initialisation and as a depth residual) only where the four pixels
     /// around the corner agree within this fraction of their mean. Default 0.02.
     pub max_depth_spread_ratio: f64,
@@ -67,6 +70,7 @@ impl Default for LandmarkConfig {
             max_prediction_error_px: 4.0,
             roi_margin_m: 0.3,
             close_loop: true,
+            silhouette_radius_px: 4,
             loop_merge_px: 1.5,
             max_depth_spread_ratio: 0.02,
         }
@@ -249,6 +253,16 @@ fn start_tracks(
         let Some(depth) = depth_at(view.depth_m, &pixel, config.max_depth_spread_ratio) else {
             continue;
         };
+        // Corners on silhouettes (T-junctions of two surfaces) move with the view: keep only
+        // corners on a surface that is continuous around them.
+        if !depth_is_smooth(
+            view.depth_m,
+            &pixel,
+            config.silhouette_radius_px,
+            config.max_depth_spread_ratio * 2.0,
+        ) {
+            continue;
+        }
         let world = view.world_from_camera * camera.unproject(&Point2::from(pixel), depth);
         if let Some(roi) = roi
             && !inside_grown(roi, &world, config.roi_margin_m)
@@ -311,6 +325,42 @@ pub fn depth_at(depth_m: &DepthImage, pixel: &Vector2<f64>, max_spread_ratio: f6
     let top = values[0] * (1.0 - fu) + values[1] * fu;
     let bottom = values[2] * (1.0 - fu) + values[3] * fu;
     Some(top * (1.0 - fv) + bottom * fv)
+}
+
+/// Whether every depth within `radius_px` (a square window) of `pixel` is valid and within
+/// `max_spread_ratio` of the centre pixel's depth.
+fn depth_is_smooth(
+    depth_m: &DepthImage,
+    pixel: &Vector2<f64>,
+    radius_px: u32,
+    max_spread_ratio: f64,
+) -> bool {
+    let (u, v) = (pixel.x.round() as i64, pixel.y.round() as i64);
+    let r = i64::from(radius_px);
+    let Some(&centre) = u32::try_from(u)
+        .ok()
+        .zip(u32::try_from(v).ok())
+        .and_then(|(u, v)| depth_m.get(u, v))
+    else {
+        return false;
+    };
+    let centre = f64::from(centre);
+    for dv in -r..=r {
+        for du in -r..=r {
+            let (x, y) = (u + du, v + dv);
+            let Some(&d) = u32::try_from(x)
+                .ok()
+                .zip(u32::try_from(y).ok())
+                .and_then(|(x, y)| depth_m.get(x, y))
+            else {
+                return false;
+            };
+            if !(d > 0.0 && (f64::from(d) - centre).abs() <= max_spread_ratio * centre) {
+                return false;
+            }
+        }
+    }
+    true
 }
 
 /// Whether `p` lies inside `roi` grown by `margin_m` on every side.
@@ -393,5 +443,69 @@ fn roi_bounds(roi: &Roi) -> ([f64; 3], [f64; 3]) {
             [center_xy[0] - radius_m, center_xy[1] - radius_m, z_min],
             [center_xy[0] + radius_m, center_xy[1] + radius_m, z_max],
         ),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::look_at;
+
+    #[test]
+    fn depth_at_interpolates_and_rejects_edges() {
+        let mut depth = DepthImage::filled(4, 4, 2.0);
+        *depth.get_mut(1, 1).unwrap() = 2.02;
+        let d = depth_at(&depth, &Vector2::new(0.5, 0.5), 0.02).unwrap();
+        assert!((d - 2.005).abs() < 1e-6, "{d}");
+        *depth.get_mut(2, 2).unwrap() = 3.0;
+        assert_eq!(depth_at(&depth, &Vector2::new(1.5, 1.5), 0.02), None);
+        assert_eq!(depth_at(&depth, &Vector2::new(3.5, 0.0), 0.02), None);
+        assert_eq!(depth_at(&depth, &Vector2::new(f64::NAN, 0.0), 0.02), None);
+    }
+
+    #[test]
+    fn roi_rect_covers_the_projected_region() {
+        let camera = PinholeCamera::from_hfov(640, 480, 80.0).unwrap();
+        let world_from_camera = look_at(
+            &Point3::new(4.0, 0.0, 2.0),
+            &Point3::origin(),
+            &Vector3::z(),
+        )
+        .unwrap();
+        let roi = Roi::Cylinder {
+            center_xy: [0.0, 0.0],
+            z_min: -0.5,
+            z_max: 0.5,
+            radius_m: 0.5,
+        };
+        let rect = roi_rect(&camera, &world_from_camera, &roi, 0.0).unwrap();
+        // The centre projects to the principal point, inside the rectangle, which is smaller
+        // than the image.
+        assert!(rect.u_min < 320 && rect.u_max > 320 && rect.v_min < 240 && rect.v_max > 240);
+        assert!(rect.u_max - rect.u_min < 400);
+        assert!(inside_grown(&roi, &Point3::new(0.6, 0.0, 0.0), 0.2));
+        assert!(!inside_grown(&roi, &Point3::new(0.6, 0.0, 0.0), 0.0));
+        let behind = look_at(
+            &Point3::new(4.0, 0.0, 2.0),
+            &Point3::new(8.0, 0.0, 2.0),
+            &Vector3::z(),
+        )
+        .unwrap();
+        assert_eq!(roi_rect(&camera, &behind, &roi, 0.0), None);
+    }
+
+    #[test]
+    fn bad_settings_are_rejected() {
+        let config = LandmarkConfig {
+            min_observations: 1,
+            ..LandmarkConfig::default()
+        };
+        assert!(matches!(
+            validate(&config),
+            Err(MappingError::InvalidConfig {
+                field: "min_observations",
+                ..
+            })
+        ));
     }
 }
