@@ -191,6 +191,9 @@ pub struct MappingConfig {
     /// The region of interest is the target's cylinder grown by this, metres. Default 1.0:
     /// the localization error (up to about 1 m) must not cut the rock off.
     pub roi_margin_m: f64,
+    /// ... and by this up and down, metres. Default 2.0: the map is anchored at the GPS
+    /// estimate of its first frame, whose vertical error can exceed a metre.
+    pub roi_vertical_margin_m: f64,
     /// Drop mesh components smaller than this many triangles. Default 500.
     pub min_component_triangles: usize,
     /// Landmarks, bundle adjustment, re-integration and meshing of the keyframes (its TSDF
@@ -208,6 +211,7 @@ impl Default for MappingConfig {
             voxel_size_m: 0.01,
             max_depth_m: 5.0,
             roi_margin_m: 1.0,
+            roi_vertical_margin_m: 2.0,
             min_component_triangles: 500,
             refine: scarp_slam::mapping::RefineConfig::default(),
             odometry: scarp_slam::odometry::OdometryConfig::default(),

@@ -64,12 +64,17 @@ pub struct MappingSession {
     odometry_failures: usize,
 }
 
-/// The region of interest: the cylinder grown by `margin_m` on every side.
-pub fn roi_of(cylinder: &VerticalCylinder, margin_m: f64) -> Roi {
+/// The region of interest: the cylinder grown by `margin_m` sideways and by `vertical_margin_m`
+/// up and down.
+///
+/// The map is anchored at the state estimate of its first frame, whose vertical error (the
+/// GPS walk) can exceed a metre and differs from the error when the target was localized: a
+/// tight vertical range would cut the rock off.
+pub fn roi_of(cylinder: &VerticalCylinder, margin_m: f64, vertical_margin_m: f64) -> Roi {
     Roi::Cylinder {
         center_xy: [cylinder.center_x_m, cylinder.center_y_m],
-        z_min: cylinder.z_bottom_m - margin_m,
-        z_max: cylinder.z_top_m + margin_m,
+        z_min: cylinder.z_bottom_m - vertical_margin_m,
+        z_max: cylinder.z_top_m + vertical_margin_m,
         radius_m: cylinder.radius_m + margin_m,
     }
 }
@@ -118,7 +123,7 @@ impl MappingSession {
         config: &MissionConfig,
     ) -> anyhow::Result<Self> {
         let m = &config.mapping;
-        let roi = roi_of(cylinder, m.roi_margin_m);
+        let roi = roi_of(cylinder, m.roi_margin_m, m.roi_vertical_margin_m);
         let tsdf = TsdfConfig {
             voxel_size_m: m.voxel_size_m as f32,
             max_depth_m: m.max_depth_m as f32,

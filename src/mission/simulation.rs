@@ -36,6 +36,38 @@ struct SearchProgress {
     altitude_m: f64,
 }
 
+/// Median height of the depth points in a ring from `1.5·radius + 0.5` to `1.5·radius + 3`
+/// metres (horizontally) around `center`: the ground around a target, seen from
+/// `world_from_camera`. `None` with fewer than 50 such points.
+pub fn ground_height_near(
+    camera: &PinholeCamera,
+    depth_m: &scarp_slam::image::DepthImage,
+    world_from_camera: &Isometry3<f64>,
+    center: &Point3<f64>,
+    radius_m: f64,
+) -> Option<f64> {
+    let (r_in, r_out) = (1.5 * radius_m + 0.5, 1.5 * radius_m + 3.0);
+    let mut heights = Vec::new();
+    for v in (0..depth_m.height()).step_by(4) {
+        for (u, &d) in depth_m.row(v).iter().enumerate().step_by(4) {
+            if d <= 0.0 {
+                continue;
+            }
+            let p = world_from_camera
+                * camera.unproject(&nalgebra::Point2::new(u as f64, f64::from(v)), f64::from(d));
+            let r = (p.x - center.x).hypot(p.y - center.y);
+            if r >= r_in && r <= r_out {
+                heights.push(p.z);
+            }
+        }
+    }
+    if heights.len() < 50 {
+        return None;
+    }
+    heights.sort_by(f64::total_cmp);
+    Some(heights[heights.len() / 2])
+}
+
 /// Inputs of a mission run.
 pub struct MissionInputs<'a> {
     /// The world (ground truth for the renderer and the evaluation).
@@ -84,6 +116,9 @@ pub struct Mission<'a> {
     report: MissionReport,
     frame_index: u64,
     min_clearance_m: Option<f64>,
+    /// The last FineLocalize depth image and its estimated pose: where the ground under a
+    /// target is, in the frame the vehicle flies in.
+    last_depth: Option<(scarp_slam::image::DepthImage, Isometry3<f64>)>,
 }
 
 impl<'a> Mission<'a> {
@@ -158,6 +193,7 @@ impl<'a> Mission<'a> {
             },
             frame_index: 0,
             min_clearance_m: None,
+            last_depth: None,
             inputs,
         })
     }
@@ -292,6 +328,7 @@ impl<'a> Mission<'a> {
             Mode::FineLocalize(id) => {
                 self.report.frames_fine_localize += 1;
                 self.perceive(&frame, &estimate, timings)?;
+                self.last_depth = Some((frame.depth_m.clone(), estimate));
                 match self.perception.target_state(id) {
                     None => {
                         // The filter dropped it as a false target.
@@ -515,7 +552,13 @@ impl<'a> Mission<'a> {
             .copied()
             .unwrap_or(c.min_radius_m);
         let radius = quantile.clamp(c.min_radius_m, c.max_radius_m);
-        let ground = self.inputs.world.terrain_height_m(center.x, center.y);
+        // The ground in the frame the vehicle flies in (the GPS error shifts everything, the
+        // DEM does not know it): measured by the depth camera around the target, else the DEM.
+        let ground = self
+            .last_depth
+            .as_ref()
+            .and_then(|(depth, pose)| ground_height_near(&self.camera, depth, pose, center, radius))
+            .unwrap_or_else(|| self.inputs.world.terrain_height_m(center.x, center.y));
         let bottom = ground - c.bottom_below_terrain_m;
         let top = (center.z + c.top_over_center_radii * radius).max(bottom + 2.0 * radius);
         Ok(VerticalCylinder::new(
