@@ -107,3 +107,42 @@ fn bad_mission_config_key_is_named() {
     assert!(stderr.contains("search_hieght_agl_m"), "{stderr}");
     assert!(!dir.path().join("out/mission.json").exists());
 }
+
+#[test]
+fn ctrl_c_leaves_a_consistent_interrupted_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let out_dir = dir.path().join("mission");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_scarp"))
+        .args([
+            "simulate",
+            "--world",
+            &data("small_world.toml"),
+            "--config",
+            &data("small_mission.toml"),
+            "--out",
+            out_dir.to_str().unwrap(),
+        ])
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    // The ground truth is written before the flight starts; interrupt the flight.
+    let started = std::time::Instant::now();
+    while !out_dir.join("world_gt/world.json").exists() {
+        assert!(started.elapsed().as_secs() < 120, "the run never started");
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+    std::thread::sleep(std::time::Duration::from_secs(2));
+    let killed = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(killed.success());
+    let status = child.wait().unwrap();
+    assert!(status.success(), "{status:?}");
+    let json: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out_dir.join("mission.json")).unwrap()).unwrap();
+    assert_eq!(json["interrupted"], true, "{json:#}");
+    assert_eq!(json["end_reason"], "interrupted");
+    assert!(out_dir.join("trajectory.txt").is_file());
+    assert!(out_dir.join("report.html").is_file());
+}
