@@ -9,7 +9,10 @@ use super::coverage::CoverageConfig;
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct MissionConfig {
-    /// Search altitude h_s above the highest terrain under the search area, metres. Default 20.
+    /// Search altitude h_s above the highest terrain under the search area, metres. Default 10:
+    /// the depth filter draws its points in [3, 18] m (DESIGN defaults), and at γ = 55° the
+    /// fine-localization circle sees its target from h/sin γ, so h above the target must stay
+    /// under about 14 m wherever the terrain is lowest.
     pub search_height_agl_m: f64,
     /// Inset of the lawn-mower area from the world's edge, metres. Default 10.
     pub search_inset_m: f64,
@@ -52,7 +55,7 @@ pub struct MissionConfig {
 impl Default for MissionConfig {
     fn default() -> Self {
         Self {
-            search_height_agl_m: 20.0,
+            search_height_agl_m: 10.0,
             search_inset_m: 10.0,
             search_camera_rate_hz: 4.0,
             map_camera_rate_hz: 20.0,
