@@ -42,8 +42,15 @@ pub struct ClosedScan {
     pub loops_closed: usize,
 }
 
-/// Area of the convex hull of the vertices with z in `[z, z + SLAB_M)`, m².
-fn slab_extent(mesh: &TriangleMesh, z: f64) -> f64 {
+/// Azimuth sectors a slab's vertices must fill (of [`SECTORS`]) to count: a slab seen from
+/// one side only has a small hull that is not a neck.
+const MIN_SECTORS: usize = 10;
+/// Sectors around the axis.
+const SECTORS: usize = 12;
+
+/// Area of the convex hull of the vertices with z in `[z, z + SLAB_M)`, m², or 0 when they do
+/// not surround `axis_xy` (fewer than [`MIN_SECTORS`] of [`SECTORS`] azimuth sectors filled).
+fn slab_extent(mesh: &TriangleMesh, z: f64, axis_xy: &Point2<f64>) -> f64 {
     let points: Vec<Point2<f64>> = mesh
         .positions
         .iter()
@@ -54,6 +61,15 @@ fn slab_extent(mesh: &TriangleMesh, z: f64) -> f64 {
         .map(|p| Point2::new(f64::from(p.x), f64::from(p.y)))
         .collect();
     if points.len() < 3 {
+        return 0.0;
+    }
+    let mut filled = [false; SECTORS];
+    for p in &points {
+        let d = p - axis_xy;
+        let a = d.y.atan2(d.x).rem_euclid(std::f64::consts::TAU);
+        filled[((a / std::f64::consts::TAU * SECTORS as f64) as usize).min(SECTORS - 1)] = true;
+    }
+    if filled.iter().filter(|&&f| f).count() < MIN_SECTORS {
         return 0.0;
     }
     polygon_signed_area(&convex_hull_2d(&points)).abs()
@@ -68,11 +84,20 @@ pub fn find_scan_neck(mesh: &TriangleMesh) -> Result<f64, FragilityError> {
         .bounds()
         .ok_or(FragilityError::EmptyMesh { mesh: "scan" })?;
     let (z_lo, z_hi) = (f64::from(lo.z), f64::from(hi.z));
+    // The rock's axis: the mean of the vertices in its top third.
+    let top: Vec<Point2<f64>> = mesh
+        .positions
+        .iter()
+        .filter(|p| f64::from(p.z) > z_hi - (z_hi - z_lo) / 3.0)
+        .map(|p| Point2::new(f64::from(p.x), f64::from(p.y)))
+        .collect();
+    let axis_xy =
+        top.iter().fold(Point2::origin(), |acc, p| acc + p.coords) / top.len().max(1) as f64;
     let mut widest = 0.0f64;
     let mut narrowest: Option<(f64, f64)> = None;
     let mut z = z_hi - SLAB_M;
     while z >= z_lo {
-        let extent = slab_extent(mesh, z);
+        let extent = slab_extent(mesh, z, &axis_xy);
         if extent <= 0.0 {
             // No surface seen at this height (a hole): no evidence either way.
             z -= STEP_M;
@@ -268,10 +293,10 @@ mod tests {
     use crate::fragility::test_shapes::{loft_solid, regular_ring, to_mesh};
     use crate::fragility::{ContactSpec, FragilityConfig, analyze};
 
-    /// A box rock (0.6 × 0.6 × 0.8 m) on a narrow square neck (0.2 m) on a wide pedestal, as
+    /// A round rock (0.84 m across, 0.8 m tall) on a narrow neck (0.28 m) on a wide pedestal, as
     /// one open surface: no bottom, like a scan.
     fn open_scan() -> TriangleMesh {
-        // (z, circumradius) keys of a square section, sampled every centimetre like a scan.
+        // (z, radius) keys of a 32-gon section, sampled every centimetre like a scan.
         let keys = [
             (0.0, 0.8),
             (0.5, 0.6),
@@ -288,7 +313,7 @@ mod tests {
         let rings: Vec<(Vec<(f64, f64)>, f64)> = (0..=180)
             .map(|i| {
                 let z = f64::from(i) * 0.01;
-                (regular_ring(4, radius_at(z), 0.0), z)
+                (regular_ring(32, radius_at(z), 0.0), z)
             })
             .collect();
         let refs: Vec<(&[(f64, f64)], f64)> = rings.iter().map(|(r, z)| (&r[..], *z)).collect();
