@@ -6,33 +6,11 @@
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use scarp::detection::{BoundingBox, Detection};
 use scarp::tracking::{Tracker, TrackerConfig};
+use scarp_slam::features::pattern::shifted_texture;
 use scarp_slam::image::GrayImage;
 
-fn texture(x: f32, y: f32) -> f32 {
-    let waves = [
-        (0.3f32, 160.0f32, 0.12f32, 0.0f32),
-        (1.9, 110.0, 0.10, 1.1),
-        (2.7, 70.0, 0.08, 2.3),
-        (0.9, 45.0, 0.06, 0.7),
-        (2.2, 30.0, 0.05, 1.9),
-        (1.3, 20.0, 0.04, 2.9),
-        (0.1, 13.0, 0.03, 0.4),
-    ];
-    0.5 + waves
-        .iter()
-        .map(|&(dir, lambda, amp, phase)| {
-            let k = std::f32::consts::TAU / lambda;
-            amp * (k * (dir.cos() * x + dir.sin() * y) + phase).sin()
-        })
-        .sum::<f32>()
-}
-
 fn frame(dx: f32, dy: f32) -> GrayImage {
-    let (w, h) = (640u32, 480u32);
-    let data = (0..w * h)
-        .map(|i| texture((i % w) as f32 - dx, (i / w) as f32 - dy))
-        .collect();
-    GrayImage::from_vec(w, h, data).expect("w·h pixels")
+    shifted_texture(640, 480, dx, dy)
 }
 
 fn detections(k: u32) -> Vec<Detection> {

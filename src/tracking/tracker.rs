@@ -488,34 +488,11 @@ fn greedy_matches(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use scarp_slam::features::pattern::shifted_texture;
 
-    /// Broadband plane-wave texture (wavelengths 13–160 px).
-    fn texture(x: f32, y: f32) -> f32 {
-        let waves = [
-            (0.3f32, 160.0f32, 0.12f32, 0.0f32),
-            (1.9, 110.0, 0.10, 1.1),
-            (2.7, 70.0, 0.08, 2.3),
-            (0.9, 45.0, 0.06, 0.7),
-            (2.2, 30.0, 0.05, 1.9),
-            (1.3, 20.0, 0.04, 2.9),
-            (0.1, 13.0, 0.03, 0.4),
-        ];
-        0.5 + waves
-            .iter()
-            .map(|&(dir, lambda, amp, phase)| {
-                let k = std::f32::consts::TAU / lambda;
-                amp * (k * (dir.cos() * x + dir.sin() * y) + phase).sin()
-            })
-            .sum::<f32>()
-    }
-
-    /// The scene shifted by `(dx, dy)`: content at x in frame 0 appears at x + (dx, dy).
+    /// The test scene shifted by `(dx, dy)`: content at x in frame 0 appears at x + (dx, dy).
     fn frame(dx: f32, dy: f32) -> GrayImage {
-        let (w, h) = (320u32, 240u32);
-        let data = (0..w * h)
-            .map(|i| texture((i % w) as f32 - dx, (i / w) as f32 - dy))
-            .collect();
-        GrayImage::from_vec(w, h, data).unwrap()
+        shifted_texture(320, 240, dx, dy)
     }
 
     fn detection(b: BoundingBox) -> Detection {

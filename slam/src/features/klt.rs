@@ -522,36 +522,8 @@ fn mean_residual(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::features::pattern::{image_from_fn as image, plane_wave_texture as texture};
     use crate::features::{CornerConfig, CornerRegion, detect_corners};
-
-    /// A smooth, corner-rich, broadband texture: plane waves of wavelengths 13–160 px, so
-    /// that coarse pyramid levels see structure too.
-    fn texture(x: f32, y: f32) -> f32 {
-        // (direction in radians, wavelength px, amplitude, phase)
-        let waves = [
-            (0.3f32, 160.0f32, 0.12f32, 0.0f32),
-            (1.9, 110.0, 0.10, 1.1),
-            (2.7, 70.0, 0.08, 2.3),
-            (0.9, 45.0, 0.06, 0.7),
-            (2.2, 30.0, 0.05, 1.9),
-            (1.3, 20.0, 0.04, 2.9),
-            (0.1, 13.0, 0.03, 0.4),
-        ];
-        0.5 + waves
-            .iter()
-            .map(|&(dir, lambda, amp, phase)| {
-                let k = std::f32::consts::TAU / lambda;
-                amp * (k * (dir.cos() * x + dir.sin() * y) + phase).sin()
-            })
-            .sum::<f32>()
-    }
-
-    fn image(width: u32, height: u32, f: impl Fn(f32, f32) -> f32) -> GrayImage {
-        let data = (0..width * height)
-            .map(|i| f((i % width) as f32, (i / width) as f32))
-            .collect();
-        GrayImage::from_vec(width, height, data).unwrap()
-    }
 
     #[test]
     fn recovers_a_large_shift_to_a_hundredth_of_a_pixel() {

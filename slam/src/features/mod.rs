@@ -43,6 +43,7 @@
 mod corners;
 mod klt;
 mod motion;
+pub mod pattern;
 mod similarity;
 
 pub use corners::{Corner, CornerConfig, CornerRegion, CornerScore, PixelRect, detect_corners};
