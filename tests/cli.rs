@@ -1,39 +1,14 @@
 //! End-to-end tests of the `scarp` binary: world ground truth, sequence rendering, bundle
 //! adjustment of a BAL problem, bad input.
 
+mod common;
+use common::{path_str, read_json, scarp, scarp_ok};
+
 use std::path::Path;
-use std::process::Command;
 
 /// A fresh temporary directory, removed when dropped.
 fn temp_dir() -> tempfile::TempDir {
     tempfile::tempdir().expect("a temporary directory")
-}
-
-fn scarp(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_scarp"))
-        .args(args)
-        .output()
-        .expect("the scarp binary runs")
-}
-
-/// Runs `scarp` and fails the test, showing its stderr, unless it succeeds.
-fn scarp_ok(args: &[&str]) -> std::process::Output {
-    let out = scarp(args);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    out
-}
-
-/// Reads a JSON file the binary wrote.
-fn read_json(path: &Path) -> serde_json::Value {
-    serde_json::from_slice(&std::fs::read(path).unwrap()).unwrap()
-}
-
-fn path_str(p: &Path) -> &str {
-    p.to_str().unwrap()
 }
 
 #[test]

@@ -2,30 +2,10 @@
 //! one fine-localization circle over target 1 of the default world, rendered by `scarp render`,
 //! then localized with ground-truth and with estimated poses.
 
+mod common;
+use common::{path_str, scarp, scarp_ok};
+
 use std::path::Path;
-use std::process::Command;
-
-fn scarp(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_scarp"))
-        .args(args)
-        .output()
-        .expect("the scarp binary runs")
-}
-
-/// Runs `scarp` and fails the test, showing its stderr, unless it succeeds.
-fn scarp_ok(args: &[&str]) -> std::process::Output {
-    let out = scarp(args);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    out
-}
-
-fn path_str(p: &Path) -> &str {
-    p.to_str().expect("a UTF-8 temporary path")
-}
 
 /// Renders the small must-show sequence: a 30 m lawn-mower square and a circle around target 1
 /// at 10 m search altitude.

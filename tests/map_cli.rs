@@ -2,25 +2,8 @@
 //! the cylinder ROI keeps memory under 10 % of the unrestricted map, and the target's mesh
 //! scores well against its ground truth (reduced version of the 120-frame figure).
 
-use std::path::Path;
-use std::process::Command;
-
-fn scarp(args: &[&str]) -> String {
-    let out = Command::new(env!("CARGO_BIN_EXE_scarp"))
-        .args(args)
-        .output()
-        .expect("runs scarp");
-    assert!(
-        out.status.success(),
-        "scarp {args:?} failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8(out.stdout).expect("utf-8")
-}
-
-fn json(path: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(path).expect("reads")).expect("json")
-}
+mod common;
+use common::{read_json as json, scarp_stdout as scarp};
 
 #[test]
 fn map_and_evaluate_default_orbit() {

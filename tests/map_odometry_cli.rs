@@ -3,25 +3,8 @@
 //! `map.json` carries the odometry and bundle-adjustment figures. The 360-frame figures of
 //! issues 4 and 5 come from the commands in `src/cli/map.rs`.
 
-use std::path::Path;
-use std::process::Command;
-
-fn scarp(args: &[&str]) -> String {
-    let out = Command::new(env!("CARGO_BIN_EXE_scarp"))
-        .args(args)
-        .output()
-        .expect("runs scarp");
-    assert!(
-        out.status.success(),
-        "scarp {args:?} failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8(out.stdout).expect("utf-8")
-}
-
-fn json(path: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(path).expect("reads")).expect("json")
-}
+mod common;
+use common::{read_json as json, scarp_stdout as scarp};
 
 fn number(map: &serde_json::Value, key: &str) -> f64 {
     map[key]

@@ -1,15 +1,11 @@
 //! End-to-end test of the closed-loop mission (`scarp simulate`) on a small world: one target,
 //! one distractor. The full default world is the README's main command; this keeps CI quick.
 
+mod common;
+use common::scarp;
+
 use std::path::Path;
 use std::process::Command;
-
-fn scarp(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_scarp"))
-        .args(args)
-        .output()
-        .expect("the scarp binary runs")
-}
 
 fn data(name: &str) -> String {
     Path::new(env!("CARGO_MANIFEST_DIR"))

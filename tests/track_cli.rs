@@ -6,33 +6,14 @@
 //!
 //! The full lawn-mower figure of the issue is measured by hand (see `src/cli/track.rs`).
 
+mod common;
+use common::{path_str, scarp, scarp_ok};
+
 use std::path::Path;
-use std::process::Command;
 
 use nalgebra::{Point3, Vector3};
 use scarp_export::tum::{StampedPose, write_tum_trajectory};
 use scarp_slam::geometry::look_at;
-
-fn scarp(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_scarp"))
-        .args(args)
-        .output()
-        .expect("the scarp binary runs")
-}
-
-fn scarp_ok(args: &[&str]) -> std::process::Output {
-    let out = scarp(args);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    out
-}
-
-fn path_str(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
 
 /// The centroid of the first target of the default world, from `scarp world`.
 fn first_target_centroid(dir: &Path) -> Point3<f64> {
