@@ -61,7 +61,6 @@ pub struct MappingSession {
     coverage: CylinderCoverage,
     stored: Vec<StoredFrame>,
     frames_mapped: usize,
-    odometry_failures: usize,
 }
 
 /// The region of interest: the cylinder grown by `margin_m` sideways and by `vertical_margin_m`
@@ -144,7 +143,6 @@ impl MappingSession {
             coverage: CylinderCoverage::new(cylinder, config.coverage),
             stored: Vec::new(),
             frames_mapped: 0,
-            odometry_failures: 0,
         })
     }
 
@@ -180,9 +178,6 @@ impl MappingSession {
         }
         frame.instance_mask = None;
         let tracked = self.tracker.process(&frame, world_from_camera_estimate)?;
-        if tracked.fell_back {
-            self.odometry_failures += 1;
-        }
         self.coverage
             .observe(&self.camera, &tracked.world_from_camera);
         if tracked.keyframe.is_some() {
@@ -199,27 +194,13 @@ impl MappingSession {
     }
 }
 
-fn stamped(
-    frames: &[StoredFrame],
-    pose: impl Fn(&StoredFrame) -> Isometry3<f64>,
-) -> Vec<StampedPose> {
-    frames
-        .iter()
-        .map(|f| StampedPose {
-            timestamp_s: f.frame.timestamp_s,
-            world_from_camera: pose(f),
-        })
-        .collect()
-}
-
-/// ATE RMSE (SE(3)-aligned) of `poses` against the stored frames' truth.
-fn ate_rmse(frames: &[StoredFrame], poses: &[Isometry3<f64>]) -> Option<f64> {
-    let truth = stamped(frames, |f| f.world_from_camera_truth);
-    let estimate: Vec<StampedPose> = frames
+/// ATE RMSE (SE(3)-aligned) of `poses` against `truth` (same length and timestamps).
+fn ate_rmse(truth: &[StampedPose], poses: &[Isometry3<f64>]) -> Option<f64> {
+    let estimate: Vec<StampedPose> = truth
         .iter()
         .zip(poses)
-        .map(|(f, p)| StampedPose {
-            timestamp_s: f.frame.timestamp_s,
+        .map(|(t, p)| StampedPose {
+            timestamp_s: t.timestamp_s,
             world_from_camera: *p,
         })
         .collect();
@@ -227,18 +208,18 @@ fn ate_rmse(frames: &[StoredFrame], poses: &[Isometry3<f64>]) -> Option<f64> {
         alignment: Alignment::Se3,
         ..TrajectoryEvalConfig::default()
     };
-    evaluate_trajectory(&truth, &estimate, &config)
+    evaluate_trajectory(truth, &estimate, &config)
         .ok()
         .map(|m| m.ate_rmse_m)
 }
 
 /// The rigid transform that best maps the mapping trajectory's camera centres onto the true
 /// ones (Umeyama, no scale): the map frame's offset from the world, the GPS error at mapping.
-fn map_to_world(frames: &[StoredFrame], poses: &[Isometry3<f64>]) -> Option<Isometry3<f64>> {
+fn map_to_world(truth: &[StampedPose], poses: &[Isometry3<f64>]) -> Option<Isometry3<f64>> {
     let source: Vec<Vector3<f64>> = poses.iter().map(|p| p.translation.vector).collect();
-    let target: Vec<Vector3<f64>> = frames
+    let target: Vec<Vector3<f64>> = truth
         .iter()
-        .map(|f| f.world_from_camera_truth.translation.vector)
+        .map(|t| t.world_from_camera.translation.vector)
         .collect();
     let s = umeyama(&source, &target, false).ok()?;
     Some(Isometry3::from_parts(
@@ -269,24 +250,31 @@ pub fn finish_target(
     report.base_coverage = session.coverage.bottom_fraction();
     report.keyframes = session.stored.len();
     let complete = session.coverage.is_complete();
-    let frames = session.stored;
-    if frames.len() < 3 {
-        report.error = Some(format!("only {} frames were mapped", frames.len()));
+    let stored = session.stored;
+    if stored.len() < 3 {
+        report.error = Some(format!("only {} frames were mapped", stored.len()));
         return Ok(false);
     }
-    let odometry_poses: Vec<Isometry3<f64>> = frames
+    // The frames move into the keyframe set; the truth stays beside it for the evaluation.
+    let truth: Vec<StampedPose> = stored
         .iter()
-        .map(|f| f.world_from_camera_odometry)
+        .map(|f| StampedPose {
+            timestamp_s: f.frame.timestamp_s,
+            world_from_camera: f.world_from_camera_truth,
+        })
         .collect();
-    let keyframes = KeyframeSet {
-        frames: frames.iter().map(|f| f.frame.clone()).collect(),
-        world_from_camera_odometry: odometry_poses.clone(),
-        world_from_camera_estimate: frames
-            .iter()
-            .map(|f| f.world_from_camera_estimate)
-            .collect(),
-        odometry_covariance: frames.iter().map(|f| f.odometry_covariance).collect(),
-    };
+    let mut keyframes = KeyframeSet::default();
+    for f in stored {
+        keyframes
+            .world_from_camera_odometry
+            .push(f.world_from_camera_odometry);
+        keyframes
+            .world_from_camera_estimate
+            .push(f.world_from_camera_estimate);
+        keyframes.odometry_covariance.push(f.odometry_covariance);
+        keyframes.frames.push(f.frame);
+    }
+    let odometry_poses = &keyframes.world_from_camera_odometry;
     let refine = RefineConfig {
         tsdf: session.tracker.volume().config().clone(),
         meshing: MeshingConfig {
@@ -363,8 +351,8 @@ pub fn finish_target(
     score_against_ground_truth(
         world,
         config,
-        &frames,
-        &odometry_poses,
+        &truth,
+        odometry_poses,
         &refined,
         &mesh,
         mesh_before.as_ref(),
@@ -381,24 +369,24 @@ pub fn finish_target(
 fn score_mesh(
     world: &World,
     rock: &scarp_datasets::world::Rock,
-    frames: &[StoredFrame],
+    truth: &[StampedPose],
     poses: &[Isometry3<f64>],
     mesh: &TriangleMesh,
     camera: &PinholeCamera,
 ) -> Option<[MeshEvaluation; 2]> {
-    let world_from_map = map_to_world(frames, poses)?;
+    let world_from_map = map_to_world(truth, poses)?;
     let mut aligned = mesh.clone();
     aligned.transform(&world_from_map);
     // Visibility from at most 60 of the mapping flight's true poses: enough to tell the base
     // and the contact from what a camera saw.
-    let step = frames.len().div_ceil(60).max(1);
+    let step = truth.len().div_ceil(60).max(1);
     let visibility = Visibility {
         world,
         camera: *camera,
-        world_from_camera: frames
+        world_from_camera: truth
             .iter()
             .step_by(step)
-            .map(|f| f.world_from_camera_truth)
+            .map(|t| t.world_from_camera)
             .collect(),
         tolerance_m: 0.01,
     };
@@ -422,7 +410,7 @@ fn score_mesh(
 fn score_against_ground_truth(
     world: &World,
     config: &MissionConfig,
-    frames: &[StoredFrame],
+    truth: &[StampedPose],
     odometry_poses: &[Isometry3<f64>],
     refined: &[Isometry3<f64>],
     mesh: &TriangleMesh,
@@ -433,8 +421,8 @@ fn score_against_ground_truth(
     let Some((rock, _)) = nearest_rock(world, &Point3::from(report.center)) else {
         return;
     };
-    report.ate_before_ba_m = ate_rmse(frames, odometry_poses);
-    report.ate_after_ba_m = ate_rmse(frames, refined);
+    report.ate_before_ba_m = ate_rmse(truth, odometry_poses);
+    report.ate_after_ba_m = ate_rmse(truth, refined);
     if let Some(pedestal) = &rock.pedestal
         && let Ok(gt) = analyze(
             &rock.mesh,
@@ -445,7 +433,7 @@ fn score_against_ground_truth(
         report.alpha_min_gt_deg = Some(gt.alpha_min_deg);
         report.alpha_error_deg = report.alpha_min_deg.map(|a| (a - gt.alpha_min_deg).abs());
     }
-    if let Some([at_1cm, at_2cm]) = score_mesh(world, rock, frames, refined, mesh, camera) {
+    if let Some([at_1cm, at_2cm]) = score_mesh(world, rock, truth, refined, mesh, camera) {
         report.fscore_1cm = Some(at_1cm.fscore);
         report.fscore_2cm = Some(at_2cm.fscore);
         report.accuracy_mean_m = Some(at_1cm.accuracy_mean_m);
@@ -453,7 +441,7 @@ fn score_against_ground_truth(
         report.gt_visible_fraction = Some(at_1cm.gt_visible_fraction);
     }
     if let Some(before) = mesh_before
-        && let Some([_, at_2cm]) = score_mesh(world, rock, frames, odometry_poses, before, camera)
+        && let Some([_, at_2cm]) = score_mesh(world, rock, truth, odometry_poses, before, camera)
     {
         report.fscore_2cm_before_ba = Some(at_2cm.fscore);
     }
