@@ -92,7 +92,6 @@ pub struct Perception {
     tracker: Tracker,
     catalog: TargetCatalog,
     rng: Xoshiro256PlusPlus,
-    config: MissionConfig,
 }
 
 impl Perception {
@@ -108,7 +107,6 @@ impl Perception {
             tracker: Tracker::new(config.tracker.clone())?,
             catalog: TargetCatalog::new(config.localization)?,
             rng: Xoshiro256PlusPlus::seed_from_u64(derive_seed(seed, 0x10c)),
-            config: config.clone(),
         })
     }
 
@@ -129,7 +127,7 @@ impl Perception {
         let tracks = self.tracker.step(&gray_from_rgb(&frame.rgb), &detections)?;
         let track_s = clock.elapsed().as_secs_f64();
         let clock = Instant::now();
-        let max_depth_m = self.config.localization.max_depth_m;
+        let max_depth_m = self.catalog.config().max_depth_m;
         let boxes: Vec<(u64, BoundingBox)> = tracks
             .iter()
             .filter(|t| t.confirmed && t.updated)
@@ -165,7 +163,7 @@ impl Perception {
     /// # Errors
     /// Never in practice: the tracker settings were valid when the mission started.
     pub fn reset_tracks(&mut self) -> anyhow::Result<()> {
-        self.tracker = Tracker::new(self.config.tracker.clone())?;
+        self.tracker = Tracker::new(self.tracker.config().clone())?;
         Ok(())
     }
 
