@@ -390,7 +390,8 @@ impl<'a> Mission<'a> {
         timings.track_s += stage.track_s;
         timings.localize_s += stage.localize_s;
         let t = frame.timestamp_s;
-        for state in self.perception.target_states() {
+        let states = self.perception.target_states();
+        for state in &states {
             if self.targets.contains_key(&state.id) {
                 continue;
             }
@@ -414,15 +415,10 @@ impl<'a> Mission<'a> {
                 .insert(state.id, MissionTarget::new(state.id, &state.center, t));
         }
         // Targets the filter removed as false never become mission targets.
-        let alive: Vec<u32> = self
-            .perception
-            .target_states()
-            .iter()
-            .map(|s| s.id)
-            .collect();
-        self.targets
-            .retain(|id, m| m.status != TargetStatus::Localizing || alive.contains(id));
-        for state in self.perception.target_states() {
+        self.targets.retain(|id, m| {
+            m.status != TargetStatus::Localizing || states.iter().any(|s| s.id == *id)
+        });
+        for state in &states {
             if let Some(m) = self.targets.get_mut(&state.id)
                 && matches!(
                     m.status,
