@@ -442,11 +442,18 @@ mod tests {
             let outliers = n / 3;
             let (s, src, dst) = outlier_case(n, outliers, seed);
             let fit = fit_similarity_robust(&src, &dst, &SimilarityFitConfig::default()).unwrap();
-            // Every inlier is found and the transform agrees with the truth over the patch.
-            prop_assert!(fit.inliers[outliers..].iter().all(|&i| i));
+            // Exactly the true inliers are kept, and the transform is then the least-squares
+            // fit to them: the best any estimator can do with this noise. Comparing with the
+            // truth itself would test the noise, not the fit (6 noisy points over 60 px can
+            // legitimately extrapolate 0.2 px wrong at the corners).
+            let truth: Vec<bool> = (0..n).map(|i| i >= outliers).collect();
+            prop_assert_eq!(&fit.inliers, &truth);
+            let oracle = fit_similarity_least_squares(&src[outliers..], &dst[outliers..], None).unwrap();
             for p in [Point2::new(0.0, 0.0), Point2::new(60.0, 0.0), Point2::new(0.0, 60.0), Point2::new(60.0, 60.0)] {
-                let e = (fit.transform.apply(&p) - s.apply(&p)).norm();
-                prop_assert!(e < 0.2, "{e} px, {} inliers, {:?}", fit.inlier_count(), fit.inliers);
+                let e = (fit.transform.apply(&p) - oracle.apply(&p)).norm();
+                prop_assert!(e < 1e-9, "{e} px from the oracle fit");
+                let e_truth = (fit.transform.apply(&p) - s.apply(&p)).norm();
+                prop_assert!(e_truth < 0.5, "{e_truth} px from the truth");
             }
         }
 
