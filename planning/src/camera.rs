@@ -20,6 +20,10 @@ pub struct CameraConfig {
     pub width_px: u32,
     /// Image height (pixels). Default 480.
     pub height_px: u32,
+    /// Fastest the mount's pitch servo turns when a ring asks for another pitch (degrees per
+    /// second). Default 30 (a hobby gimbal's slew rate; slow enough that consecutive frames at
+    /// 20 Hz overlap for odometry).
+    pub pitch_rate_deg_s: f64,
 }
 
 impl Default for CameraConfig {
@@ -29,6 +33,7 @@ impl Default for CameraConfig {
             hfov_deg: 80.0,
             width_px: 640,
             height_px: 480,
+            pitch_rate_deg_s: 30.0,
         }
     }
 }
@@ -63,6 +68,7 @@ impl CameraConfig {
         check_range("camera.hfov_deg", self.hfov_deg, 1e-6, 180.0 - 1e-6)?;
         check_positive("camera.width_px", f64::from(self.width_px))?;
         check_positive("camera.height_px", f64::from(self.height_px))?;
+        check_positive("camera.pitch_rate_deg_s", self.pitch_rate_deg_s)?;
         Ok(())
     }
 
@@ -101,16 +107,7 @@ impl CameraConfig {
     /// The camera mount: maps camera (OpenCV) coordinates to body (FLU) coordinates. The camera
     /// sits at the body origin (the paper neglects the offset, d₁:d₂ > 10:1).
     pub fn body_from_camera(&self) -> Isometry3<f64> {
-        let g = self.pitch_down_rad();
-        // Columns: camera x (right), y (down), z (forward) expressed in FLU.
-        let z_cam = Vector3::new(g.cos(), 0.0, -g.sin());
-        let x_cam = Vector3::new(0.0, -1.0, 0.0);
-        let y_cam = z_cam.cross(&x_cam);
-        let rot = Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[x_cam, y_cam, z_cam]));
-        Isometry3::from_parts(
-            Translation3::identity(),
-            UnitQuaternion::from_rotation_matrix(&rot),
-        )
+        body_from_camera_at_pitch(self.pitch_down_rad())
     }
 
     /// Ground footprint over flat ground `height_above_ground_m` below the camera, body level.
@@ -146,6 +143,21 @@ impl CameraConfig {
             far_distance_m: dist(g - half_v),
         })
     }
+}
+
+/// The camera mount at pitch `pitch_down_rad` below the body's x axis (negative looks up):
+/// maps camera (OpenCV) coordinates to body (FLU) coordinates, the camera at the body origin.
+pub fn body_from_camera_at_pitch(pitch_down_rad: f64) -> Isometry3<f64> {
+    let g = pitch_down_rad;
+    // Columns: camera x (right), y (down), z (forward) expressed in FLU.
+    let z_cam = Vector3::new(g.cos(), 0.0, -g.sin());
+    let x_cam = Vector3::new(0.0, -1.0, 0.0);
+    let y_cam = z_cam.cross(&x_cam);
+    let rot = Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[x_cam, y_cam, z_cam]));
+    Isometry3::from_parts(
+        Translation3::identity(),
+        UnitQuaternion::from_rotation_matrix(&rot),
+    )
 }
 
 #[cfg(test)]

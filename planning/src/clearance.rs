@@ -499,6 +499,18 @@ pub enum Repair {
         /// Raise (m).
         raise_m: f64,
     },
+    /// A mapping ring was widened at its height (the base ring, whose level view is kept).
+    WidenedRing {
+        /// Ring index.
+        ring: usize,
+        /// Radius increase (m).
+        widen_m: f64,
+    },
+    /// The base ring could not be cleared within its limits and is not flown.
+    DroppedRing {
+        /// Ring index.
+        ring: usize,
+    },
     /// A waypoint was inserted on the straight path to keep the trajectory near it.
     InsertedWaypoint {
         /// Index of the segment that was split.

@@ -44,6 +44,70 @@ pub struct MappingRingConfig {
     /// How far below the terrain the cylinder's centre may lie before the target is rejected as
     /// underground (m). Default 0.5.
     pub below_terrain_tolerance_m: f64,
+    /// A low ring, flown first, that looks almost level at the rock's base. Default
+    /// [`BaseRingConfig::default`] (on).
+    pub base_ring: BaseRingConfig,
+}
+
+/// The base ring: the paper's rings all look down at γ, so from every ring a rock's contact
+/// with its pedestal hides under the rock's own overhang, and the base (what fragility is
+/// measured from) is never seen. This ring flies low around the target with the camera
+/// pitched almost level, so the neck is seen from the side. It is flown first, and the camera
+/// mount's pitch slews from it to γ as the vehicle climbs to the first of the paper's rings.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct BaseRingConfig {
+    /// Fly the base ring. Default true.
+    pub enabled: bool,
+    /// Height of the ring above the cylinder's bottom (m). Default 1.8: the bottom sits 0.2 m
+    /// below the ground, so the camera flies 1.6 m above it, just over the 1.5 m terrain
+    /// clearance and level with a pedestal's top (rocks stand on pedestals about 1 m tall).
+    pub height_above_bottom_m: f64,
+    /// Camera pitch below the horizon on this ring (degrees, may be negative for looking
+    /// up). Default 5: the vertical field of view (±32° at the default camera) then spans the
+    /// pedestal's foot and the rock's top from 1.5 m away.
+    pub camera_pitch_down_deg: f64,
+    /// If the ring is too close to terrain or rocks, it is first widened in steps of the
+    /// clearance repair step up to this much (m), which keeps its level view. Default 2.
+    pub max_widen_m: f64,
+    /// Then raised up to this much (m); beyond that the ring is dropped rather than the plan
+    /// refused. Default 1.
+    pub max_raise_m: f64,
+}
+
+impl Default for BaseRingConfig {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            height_above_bottom_m: 1.8,
+            camera_pitch_down_deg: 5.0,
+            max_widen_m: 2.0,
+            max_raise_m: 1.0,
+        }
+    }
+}
+
+impl BaseRingConfig {
+    /// Checks the values: a finite height, a pitch whose scan band stays within ±89° of the
+    /// horizon, and non-negative repair limits.
+    pub fn validate(&self, vertical_scan_deg: f64) -> Result<(), PlanError> {
+        check_range(
+            "mapping.base_ring.height_above_bottom_m",
+            self.height_above_bottom_m,
+            0.0,
+            1e3,
+        )?;
+        let half = 0.5 * vertical_scan_deg;
+        check_range(
+            "mapping.base_ring.camera_pitch_down_deg",
+            self.camera_pitch_down_deg,
+            -89.0 + half,
+            89.0 - half,
+        )?;
+        check_range("mapping.base_ring.max_widen_m", self.max_widen_m, 0.0, 1e3)?;
+        check_range("mapping.base_ring.max_raise_m", self.max_raise_m, 0.0, 1e3)?;
+        Ok(())
+    }
 }
 
 impl Default for MappingRingConfig {
@@ -56,6 +120,7 @@ impl Default for MappingRingConfig {
             first_ring_counter_clockwise: true,
             max_rings: 20,
             below_terrain_tolerance_m: 0.5,
+            base_ring: BaseRingConfig::default(),
         }
     }
 }
@@ -117,6 +182,7 @@ impl MappingRingConfig {
                 reason: "scan band is empty".into(),
             });
         }
+        self.base_ring.validate(self.vertical_scan_deg)?;
         Ok(())
     }
 }
@@ -146,13 +212,17 @@ pub struct Ring {
     pub band_bottom_m: f64,
     /// Highest height on the cylinder surface covered by the scan band (m).
     pub band_top_m: f64,
+    /// Camera pitch below the horizon flown on this ring (degrees): γ, or the base ring's.
+    pub camera_pitch_down_deg: f64,
 }
 
 impl Ring {
-    fn with_band(mut self, cylinder: &VerticalCylinder, lower: f64, upper: f64) -> Self {
+    /// Sets the band from the ring's pitch and the half scan angle β/2.
+    fn with_band(mut self, cylinder: &VerticalCylinder, half_scan_rad: f64) -> Self {
+        let g = self.camera_pitch_down_deg.to_radians();
         let s = self.radius_m - cylinder.radius_m;
-        self.band_bottom_m = self.z_m - s * lower.tan();
-        self.band_top_m = self.z_m - s * upper.tan();
+        self.band_bottom_m = self.z_m - s * (g + half_scan_rad).tan();
+        self.band_top_m = self.z_m - s * (g - half_scan_rad).tan();
         self
     }
 
@@ -192,6 +262,39 @@ impl RingPlan {
             .iter()
             .map(|r| (r.band_bottom_m, r.band_top_m))
             .collect()
+    }
+
+    /// Camera pitch below the horizon (degrees) for a vehicle at height `z_m` while it flies
+    /// this plan: each ring's pitch at its height, linear in height between rings (so the
+    /// mount slews while the vehicle climbs from ring to ring), and the nearest ring's beyond
+    /// the lowest and the highest. `default_deg` when the plan has no rings.
+    pub fn camera_pitch_down_deg_at(&self, z_m: f64, default_deg: f64) -> f64 {
+        let mut by_height: Vec<(f64, f64)> = self
+            .rings
+            .iter()
+            .map(|r| (r.z_m, r.camera_pitch_down_deg))
+            .collect();
+        by_height.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let (Some(&lowest), Some(&highest)) = (by_height.first(), by_height.last()) else {
+            return default_deg;
+        };
+        if z_m <= lowest.0 {
+            return lowest.1;
+        }
+        if z_m >= highest.0 {
+            return highest.1;
+        }
+        by_height
+            .windows(2)
+            .find(|w| z_m <= w[1].0)
+            .map_or(highest.1, |w| {
+                let span = w[1].0 - w[0].0;
+                if span <= 1e-9 {
+                    w[1].1
+                } else {
+                    w[0].1 + (w[1].1 - w[0].1) * (z_m - w[0].0) / span
+                }
+            })
     }
 
     /// The parts of [z_bottom, z_top] that no band covers (m). Empty when covered.
@@ -258,17 +361,22 @@ pub fn plan_mapping_rings(
 ) -> Result<RingPlan, PlanError> {
     start.validate("start")?;
     let heights = ring_heights(cylinder, camera, cfg)?;
-    let (lower, upper) = scan_depressions_rad(camera, cfg);
+    let half_scan = 0.5 * cfg.vertical_scan_deg.to_radians();
     let axis = cylinder.axis_point(start.position_m.z);
     let start_azimuth = if (start.position_m.xy() - axis.xy()).norm() > 1e-6 {
         yaw_toward(&axis, &start.position_m)
     } else {
         start.yaw_rad
     };
-    let rings = heights
-        .iter()
+    let base = cfg.base_ring.enabled.then_some((
+        cylinder.z_bottom_m + cfg.base_ring.height_above_bottom_m,
+        cfg.base_ring.camera_pitch_down_deg,
+    ));
+    let rings = base
+        .into_iter()
+        .chain(heights.iter().map(|&z| (z, camera.pitch_down_deg)))
         .enumerate()
-        .map(|(k, &z)| {
+        .map(|(k, (z, pitch_deg))| {
             Ring {
                 center_x_m: cylinder.center_x_m,
                 center_y_m: cylinder.center_y_m,
@@ -277,8 +385,9 @@ pub fn plan_mapping_rings(
                 counter_clockwise: cfg.first_ring_counter_clockwise == (k % 2 == 0),
                 band_bottom_m: 0.0,
                 band_top_m: 0.0,
+                camera_pitch_down_deg: pitch_deg,
             }
-            .with_band(cylinder, lower, upper)
+            .with_band(cylinder, half_scan)
         })
         .collect();
     Ok(assemble(
@@ -342,6 +451,68 @@ fn assemble(
     }
 }
 
+/// Moves a ring that comes too close to `env` until it is clear, trying in order:
+/// - the base ring (`base` given): widening it (which keeps its level view of the neck), then
+///   raising it, within the base ring's limits;
+/// - any other ring: sliding it up and out along its lower scan ray (which keeps its band's
+///   bottom), then raising it, within `ccfg.max_raise_m`.
+///
+/// `None` when nothing within the limits is clear.
+fn repair_ring(
+    ring: &Ring,
+    k: usize,
+    base: Option<&BaseRingConfig>,
+    cylinder: &VerticalCylinder,
+    half_scan_rad: f64,
+    env: &Environment,
+    ccfg: &ClearanceConfig,
+) -> Option<(Ring, Repair)> {
+    let step = ccfg.repair_step_m;
+    let steps =
+        |limit_m: f64| (1..=(limit_m / step).floor() as usize).map(move |s| s as f64 * step);
+    // (raise, widen) moves, in the order they are tried.
+    type Moves = Vec<(f64, f64)>;
+    let (first, then): (Moves, Moves) = match base {
+        Some(b) => (
+            steps(b.max_widen_m).map(|w| (0.0, w)).collect(),
+            steps(b.max_raise_m).map(|r| (r, 0.0)).collect(),
+        ),
+        None => {
+            let lower = ring.camera_pitch_down_deg.to_radians() + half_scan_rad;
+            (
+                steps(ccfg.max_raise_m)
+                    .map(|r| (r, r / lower.tan()))
+                    .collect(),
+                steps(ccfg.max_raise_m).map(|r| (r, 0.0)).collect(),
+            )
+        }
+    };
+    first
+        .into_iter()
+        .chain(then)
+        .find_map(|(raise_m, widen_m)| {
+            let cand = Ring {
+                z_m: ring.z_m + raise_m,
+                radius_m: ring.radius_m + widen_m,
+                ..*ring
+            }
+            .with_band(cylinder, half_scan_rad);
+            if !ring_clearance(&cand, env, ccfg).is_clear() {
+                return None;
+            }
+            let repair = match (raise_m > 0.0, widen_m > 0.0) {
+                (true, true) => Repair::SlidRing {
+                    ring: k,
+                    raise_m,
+                    widen_m,
+                },
+                (true, false) => Repair::RaisedRing { ring: k, raise_m },
+                _ => Repair::WidenedRing { ring: k, widen_m },
+            };
+            Some((cand, repair))
+        })
+}
+
 /// Samples a full ring every `spacing_m` of arc and returns its clearance report.
 fn ring_clearance(ring: &Ring, env: &Environment, ccfg: &ClearanceConfig) -> ClearanceReport {
     let n = ((std::f64::consts::TAU * ring.radius_m / ccfg.path_sample_spacing_m).ceil() as usize)
@@ -375,63 +546,23 @@ pub fn plan_mapping_rings_clear(
         cfg.below_terrain_tolerance_m,
     )?;
     let plan = plan_mapping_rings(cylinder, start, camera, cfg)?;
-    let (lower, upper) = scan_depressions_rad(camera, cfg);
+    let half_scan = 0.5 * cfg.vertical_scan_deg.to_radians();
     let mut repairs = Vec::new();
-    let mut rings = plan.rings.clone();
-    let steps = (ccfg.max_raise_m / ccfg.repair_step_m).floor() as usize;
-    for (k, ring) in rings.iter_mut().enumerate() {
+    let mut rings = Vec::with_capacity(plan.rings.len());
+    for (k, ring) in plan.rings.iter().enumerate() {
         let report = ring_clearance(ring, env, ccfg);
         if report.is_clear() {
+            rings.push(*ring);
             continue;
         }
-        let mut fixed = None;
-        // Slide along the lower ray: raise Δ, widen Δ / tan(lower).
-        for s in 1..=steps {
-            let raise = s as f64 * ccfg.repair_step_m;
-            let widen = raise / lower.tan();
-            let cand = Ring {
-                z_m: ring.z_m + raise,
-                radius_m: ring.radius_m + widen,
-                ..*ring
-            }
-            .with_band(cylinder, lower, upper);
-            if ring_clearance(&cand, env, ccfg).is_clear() {
-                fixed = Some((
-                    cand,
-                    Repair::SlidRing {
-                        ring: k,
-                        raise_m: raise,
-                        widen_m: widen,
-                    },
-                ));
-                break;
-            }
-        }
-        if fixed.is_none() {
-            for s in 1..=steps {
-                let raise = s as f64 * ccfg.repair_step_m;
-                let cand = Ring {
-                    z_m: ring.z_m + raise,
-                    ..*ring
-                }
-                .with_band(cylinder, lower, upper);
-                if ring_clearance(&cand, env, ccfg).is_clear() {
-                    fixed = Some((
-                        cand,
-                        Repair::RaisedRing {
-                            ring: k,
-                            raise_m: raise,
-                        },
-                    ));
-                    break;
-                }
-            }
-        }
-        match fixed {
+        let base = (cfg.base_ring.enabled && k == 0).then_some(&cfg.base_ring);
+        match repair_ring(ring, k, base, cylinder, half_scan, env, ccfg) {
             Some((cand, rep)) => {
-                *ring = cand;
+                rings.push(cand);
                 repairs.push(rep);
             }
+            // The base ring is an extra: without it the paper's rings still map the rock.
+            None if base.is_some() => repairs.push(Repair::DroppedRing { ring: k }),
             None => {
                 return Err(report.to_error(format!(
                     "ring {k} at z = {:.2} m: neither sliding out nor raising by up to {} m clears it",
@@ -498,13 +629,85 @@ mod tests {
             &MappingRingConfig::default(),
         )
         .unwrap();
-        assert!(!plan.rings.is_empty());
+        // The base ring, then the paper's one ring.
+        assert_eq!(plan.rings.len(), 2);
         assert!(
             plan.coverage_gaps().is_empty(),
             "{:?}",
             plan.coverage_gaps()
         );
-        assert!((plan.rings[0].band_bottom_m - 0.0).abs() < 1e-12);
+        assert!((plan.rings[1].band_bottom_m - 0.0).abs() < 1e-12);
+        assert_eq!(plan.rings[1].camera_pitch_down_deg, 55.0);
+    }
+
+    #[test]
+    fn base_ring_is_flown_first_low_and_nearly_level() {
+        let cyl = VerticalCylinder::new(0.0, 0.0, 1.0, 0.0, 3.0).unwrap();
+        let start = Waypoint::new(Point3::new(10.0, 0.0, 8.0), 0.0);
+        let cfg = MappingRingConfig::default();
+        let plan = plan_mapping_rings(&cyl, &start, &CameraConfig::default(), &cfg).unwrap();
+        let base = plan.rings[0];
+        assert!((base.z_m - 1.8).abs() < 1e-12);
+        assert_eq!(base.camera_pitch_down_deg, 5.0);
+        assert_ne!(base.counter_clockwise, plan.rings[1].counter_clockwise);
+        // Its band, 1.5 m out with β = 40°, spans z − 1.5·tan 25° .. z + 1.5·tan 15°.
+        assert!((base.band_bottom_m - (1.8 - 1.5 * 25f64.to_radians().tan())).abs() < 1e-9);
+        assert!((base.band_top_m - (1.8 + 1.5 * 15f64.to_radians().tan())).abs() < 1e-9);
+        // The path reaches the base ring before any other.
+        let first_on_ring = plan.path.waypoints[plan.ring_waypoints[0].start];
+        assert!((first_on_ring.position_m.z - 1.8).abs() < 1e-12);
+        // Without it the plan is the paper's.
+        let paper = MappingRingConfig {
+            base_ring: BaseRingConfig {
+                enabled: false,
+                ..cfg.base_ring
+            },
+            ..cfg
+        };
+        let plan_paper =
+            plan_mapping_rings(&cyl, &start, &CameraConfig::default(), &paper).unwrap();
+        assert_eq!(plan_paper.rings.len() + 1, plan.rings.len());
+        assert_eq!(plan_paper.rings[0].z_m, plan.rings[1].z_m);
+    }
+
+    #[test]
+    fn camera_pitch_follows_the_rings_by_height() {
+        let cyl = VerticalCylinder::new(0.0, 0.0, 1.0, 0.0, 3.0).unwrap();
+        let start = Waypoint::new(Point3::new(10.0, 0.0, 8.0), 0.0);
+        let plan = plan_mapping_rings(
+            &cyl,
+            &start,
+            &CameraConfig::default(),
+            &MappingRingConfig::default(),
+        )
+        .unwrap();
+        let (z0, z1) = (plan.rings[0].z_m, plan.rings[1].z_m);
+        assert_eq!(plan.camera_pitch_down_deg_at(z0 - 1.0, 55.0), 5.0);
+        assert_eq!(plan.camera_pitch_down_deg_at(z0, 55.0), 5.0);
+        assert!((plan.camera_pitch_down_deg_at(0.5 * (z0 + z1), 55.0) - 30.0).abs() < 1e-9);
+        assert_eq!(plan.camera_pitch_down_deg_at(z1 + 10.0, 55.0), 55.0);
+        let empty = RingPlan {
+            rings: Vec::new(),
+            ..plan
+        };
+        assert_eq!(empty.camera_pitch_down_deg_at(3.0, 55.0), 55.0);
+    }
+
+    #[test]
+    fn base_ring_rejects_a_pitch_beyond_the_horizon_limits() {
+        let cfg = MappingRingConfig {
+            base_ring: BaseRingConfig {
+                camera_pitch_down_deg: -80.0,
+                ..BaseRingConfig::default()
+            },
+            ..MappingRingConfig::default()
+        };
+        let err = cfg.validate(&CameraConfig::default()).unwrap_err();
+        assert!(
+            err.to_string()
+                .contains("mapping.base_ring.camera_pitch_down_deg"),
+            "{err}"
+        );
     }
 
     #[test]

@@ -13,32 +13,36 @@ use scarp_planning::prelude::*;
 
 /// Independent of the planner's band formula: a height z on the cylinder surface facing a ring
 /// waypoint is seen if the ray from the camera to it is inside the scan angle β around the
-/// optical axis (depression γ), and inside the camera's actual vertical field of view.
+/// optical axis (depression γ, or the base ring's pitch), and inside the camera's actual
+/// vertical field of view.
 fn seen_by_some_ring(
     plan: &RingPlan,
     camera: &CameraConfig,
     cfg: &MappingRingConfig,
     z: f64,
 ) -> bool {
-    let g = camera.pitch_down_rad();
     let half_beta = 0.5 * cfg.vertical_scan_deg.to_radians();
     let half_vfov = 0.5 * camera.vfov_rad();
     let cyl = &plan.cylinder;
-    plan.ring_waypoints.iter().any(|range| {
-        plan.path.waypoints[range.clone()].iter().any(|w| {
-            let cam = w.position_m;
-            let horiz = ((cam.x - cyl.center_x_m).powi(2) + (cam.y - cyl.center_y_m).powi(2))
-                .sqrt()
-                - cyl.radius_m;
-            let depression = (cam.z - z).atan2(horiz);
-            // The optical axis points at the cylinder axis (yaw toward the axis).
-            let toward = (cyl.center_y_m - cam.y).atan2(cyl.center_x_m - cam.x);
-            let yaw_ok = wrap_angle(toward - w.yaw_rad).abs() < 1e-6;
-            yaw_ok
-                && (depression - g).abs() <= half_beta + 1e-9
-                && (depression - g).abs() <= half_vfov
+    plan.ring_waypoints
+        .iter()
+        .zip(&plan.rings)
+        .any(|(range, ring)| {
+            let g = ring.camera_pitch_down_deg.to_radians();
+            plan.path.waypoints[range.clone()].iter().any(|w| {
+                let cam = w.position_m;
+                let horiz = ((cam.x - cyl.center_x_m).powi(2) + (cam.y - cyl.center_y_m).powi(2))
+                    .sqrt()
+                    - cyl.radius_m;
+                let depression = (cam.z - z).atan2(horiz);
+                // The optical axis points at the cylinder axis (yaw toward the axis).
+                let toward = (cyl.center_y_m - cam.y).atan2(cyl.center_x_m - cam.x);
+                let yaw_ok = wrap_angle(toward - w.yaw_rad).abs() < 1e-6;
+                yaw_ok
+                    && (depression - g).abs() <= half_beta + 1e-9
+                    && (depression - g).abs() <= half_vfov
+            })
         })
-    })
 }
 
 proptest! {
@@ -63,9 +67,10 @@ proptest! {
             let z = bottom + height * k as f64 / n as f64;
             prop_assert!(seen_by_some_ring(&plan, &camera, &cfg, z), "z = {z} unseen; rings {:?}", plan.rings);
         }
-        // The first ring's lower ray just reaches the bottom (paper §IV).
+        // The first of the paper's rings (after the base ring) has its lower ray just
+        // reaching the bottom (paper §IV).
         let (lower, _) = scan_depressions_rad(&camera, &cfg);
-        prop_assert!((plan.rings[0].z_m - (bottom + standoff * lower.tan())).abs() < 1e-9);
+        prop_assert!((plan.rings[1].z_m - (bottom + standoff * lower.tan())).abs() < 1e-9);
         // Rings alternate direction and sit at r_e + r_m.
         for (k, r) in plan.rings.iter().enumerate() {
             prop_assert_eq!(r.counter_clockwise, k % 2 == 0);
@@ -227,7 +232,8 @@ fn blocked_ring_is_rejected_with_a_reason() {
             source_name,
             ..
         } => {
-            assert!(reason.contains("ring 0"), "{reason}");
+            // Ring 0, the base ring, is dropped when blocked; the paper's first ring is not.
+            assert!(reason.contains("ring 1"), "{reason}");
             assert_eq!(source_name, "obstacle 0");
         }
         other => panic!("unexpected {other}"),

@@ -61,6 +61,9 @@ pub struct MappingSession {
     coverage: CylinderCoverage,
     stored: Vec<StoredFrame>,
     frames_mapped: usize,
+    /// The last mapped frame's odometry position minus its true position (simulation only:
+    /// what a controller flying on the odometry would be off by).
+    navigation_error_m: Option<Vector3<f64>>,
 }
 
 /// The region of interest: the cylinder grown by `margin_m` sideways and by `vertical_margin_m`
@@ -143,12 +146,21 @@ impl MappingSession {
             coverage: CylinderCoverage::new(cylinder, config.coverage),
             stored: Vec::new(),
             frames_mapped: 0,
+            navigation_error_m: None,
         })
     }
 
     /// The target being mapped.
     pub fn target_id(&self) -> u32 {
         self.target_id
+    }
+
+    /// How far the odometry's position of the last mapped frame is from the truth (metres,
+    /// world ENU): the navigation error of a vehicle flying on the map's odometry. `None`
+    /// before the first frame and after an odometry failure (then the state estimate is all
+    /// there is).
+    pub fn navigation_error_m(&self) -> Option<Vector3<f64>> {
+        self.navigation_error_m
     }
 
     /// Coverage of the cylinder so far.
@@ -178,6 +190,10 @@ impl MappingSession {
         }
         frame.instance_mask = None;
         let tracked = self.tracker.process(&frame, world_from_camera_estimate)?;
+        self.navigation_error_m = (!tracked.fell_back).then(|| {
+            tracked.world_from_camera.translation.vector
+                - world_from_camera_truth.translation.vector
+        });
         self.coverage
             .observe(&self.camera, &tracked.world_from_camera);
         if tracked.keyframe.is_some() {

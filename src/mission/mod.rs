@@ -4,6 +4,7 @@
 //! - [`motion`]: the one motion system (min-snap trajectories flown by the geometric controller
 //!   on the quadrotor model) that every mode uses.
 //! - [`mode`]: the modes and the flight log.
+//! - [`mount`]: the camera mount's pitch servo (γ for search, nearly level on the base ring).
 //! - [`catalog`]: the mission's targets and their status.
 //! - [`simulation`]: the simulation loop and the state machine.
 //! - [`perception`]: detect → track → localize during Search and FineLocalize.
@@ -20,6 +21,7 @@ pub mod html;
 pub mod mapping;
 pub mod mode;
 pub mod motion;
+pub mod mount;
 pub mod perception;
 pub mod report;
 pub mod simulation;

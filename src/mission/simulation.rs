@@ -7,14 +7,14 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 use anyhow::Context;
-use nalgebra::{Isometry3, Point3};
+use nalgebra::{Isometry3, Point3, Vector3};
 use scarp_datasets::estimator::StateEstimator;
 use scarp_datasets::noise::derive_seed;
 use scarp_datasets::render::Renderer;
 use scarp_datasets::world::World;
 use scarp_export::tum::{StampedPose, write_tum_trajectory};
 use scarp_planning::prelude::{
-    Environment, SearchArea, VerticalCylinder, Waypoint, plan_fine_localization_clear,
+    Environment, RingPlan, SearchArea, VerticalCylinder, Waypoint, plan_fine_localization_clear,
     plan_lawn_mower_clear, plan_mapping_rings_clear,
 };
 use scarp_slam::{PinholeCamera, RgbdFrame};
@@ -24,6 +24,7 @@ use super::config::MissionConfig;
 use super::mapping::{MappingSession, finish_target};
 use super::mode::{FlightLogEntry, Mode};
 use super::motion::MotionSystem;
+use super::mount::CameraMount;
 use super::perception::Perception;
 use super::report::{MissionReport, ModeChange, StageTimings};
 
@@ -101,7 +102,9 @@ pub struct Progress {
 pub struct Mission<'a> {
     inputs: MissionInputs<'a>,
     camera: PinholeCamera,
-    body_from_camera: Isometry3<f64>,
+    mount: CameraMount,
+    /// The mapping rings being flown: the mount's pitch follows them by height.
+    ring_plan: Option<RingPlan>,
     renderer: Renderer<'a>,
     env: Environment,
     motion: MotionSystem,
@@ -165,7 +168,8 @@ impl<'a> Mission<'a> {
         let estimator = StateEstimator::new(&config.estimator, derive_seed(inputs.seed, 0x5e57));
         Ok(Self {
             camera,
-            body_from_camera: cam.body_from_camera(),
+            mount: CameraMount::new(cam),
+            ring_plan: None,
             renderer: Renderer::new(world),
             env,
             motion,
@@ -280,7 +284,7 @@ impl<'a> Mission<'a> {
     fn step(&mut self, timings: &mut StageTimings) -> anyhow::Result<()> {
         let t = self.motion.time_s() + self.camera_period_s();
         let clock = Instant::now();
-        let drift = self.estimator.position_drift_m();
+        let drift = self.navigation_error_m();
         self.motion.advance_to(t, &drift)?;
         let t = self.motion.time_s();
         let world_from_body = self.motion.world_from_body();
@@ -298,7 +302,8 @@ impl<'a> Mission<'a> {
         }
         timings.flight_s += clock.elapsed().as_secs_f64();
 
-        let truth = world_from_body * self.body_from_camera;
+        self.slew_mount(t);
+        let truth = world_from_body * self.mount.body_from_camera();
         let estimate = self.estimator.observe(t, &truth);
         self.log.push(FlightLogEntry {
             time_s: t,
@@ -365,6 +370,30 @@ impl<'a> Mission<'a> {
             Mode::Done => {}
         }
         Ok(())
+    }
+
+    /// What the controller's position estimate is off by: while mapping, the vehicle flies on
+    /// the map's odometry (anchored at the state estimate when mapping began, so the rings stay
+    /// put around the rock while the GPS walk wanders); otherwise on the state estimate.
+    fn navigation_error_m(&self) -> Vector3<f64> {
+        self.mapping
+            .as_ref()
+            .and_then(MappingSession::navigation_error_m)
+            .unwrap_or_else(|| self.estimator.position_drift_m())
+    }
+
+    /// Turns the camera mount toward the pitch the mapping rings ask for at the reference's
+    /// height, or toward γ outside mapping.
+    fn slew_mount(&mut self, t: f64) {
+        let camera = &self.inputs.config.planning.camera;
+        let z = self.motion.current_waypoint().position_m.z;
+        let target_deg = self
+            .ring_plan
+            .as_ref()
+            .map_or(camera.pitch_down_deg, |plan| {
+                plan.camera_pitch_down_deg_at(z, camera.pitch_down_deg)
+            });
+        self.mount.slew_toward(target_deg.to_radians(), t);
     }
 
     /// Renders the true view and applies the sensor's noise (seeded per frame).
@@ -583,7 +612,8 @@ impl<'a> Mission<'a> {
         let result = rings.map_err(anyhow::Error::from).and_then(|rings| {
             self.motion
                 .follow(&rings.path.waypoints[1..], &self.env, &config.planning)
-                .map_err(anyhow::Error::from)
+                .map_err(anyhow::Error::from)?;
+            Ok(rings)
         });
         timings.planning_s += clock.elapsed().as_secs_f64();
         if let Some(m) = self.targets.get_mut(&id) {
@@ -594,7 +624,8 @@ impl<'a> Mission<'a> {
             m.cylinder = Some(cylinder);
         }
         match result {
-            Ok(()) => {
+            Ok(rings) => {
+                self.ring_plan = Some(rings);
                 self.mapping = Some(MappingSession::new(
                     id,
                     &cylinder,
@@ -660,6 +691,7 @@ impl<'a> Mission<'a> {
     /// Back to the lawn-mower from where it was left.
     fn resume_search(&mut self, timings: &mut StageTimings) -> anyhow::Result<()> {
         self.perception.reset_tracks()?;
+        self.ring_plan = None;
         let clock = Instant::now();
         let mut path: Vec<Waypoint> = self.resume_point.take().into_iter().collect();
         path.extend_from_slice(
