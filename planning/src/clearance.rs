@@ -506,10 +506,13 @@ pub enum Repair {
         /// Radius increase (m).
         widen_m: f64,
     },
-    /// The base ring could not be cleared within its limits and is not flown.
+    /// The base ring could not be cleared (itself, or the path to and from it) and is not
+    /// flown.
     DroppedRing {
         /// Ring index.
         ring: usize,
+        /// What blocked it.
+        reason: String,
     },
     /// A waypoint was inserted on the straight path to keep the trajectory near it.
     InsertedWaypoint {

@@ -451,6 +451,15 @@ fn assemble(
     }
 }
 
+/// How every ring is flown: where its waypoints start, how many there are, and the half scan
+/// angle β/2 its band is seen with.
+#[derive(Debug, Clone, Copy)]
+struct FlownRing {
+    start_azimuth_rad: f64,
+    waypoints: usize,
+    half_scan_rad: f64,
+}
+
 /// Moves a ring that comes too close to `env` until it is clear, trying in order:
 /// - the base ring (`base` given): widening it (which keeps its level view of the neck), then
 ///   raising it, within the base ring's limits;
@@ -463,10 +472,11 @@ fn repair_ring(
     k: usize,
     base: Option<&BaseRingConfig>,
     cylinder: &VerticalCylinder,
-    half_scan_rad: f64,
+    flown: &FlownRing,
     env: &Environment,
     ccfg: &ClearanceConfig,
 ) -> Option<(Ring, Repair)> {
+    let half_scan_rad = flown.half_scan_rad;
     let step = ccfg.repair_step_m;
     let steps =
         |limit_m: f64| (1..=(limit_m / step).floor() as usize).map(move |s| s as f64 * step);
@@ -497,7 +507,7 @@ fn repair_ring(
                 ..*ring
             }
             .with_band(cylinder, half_scan_rad);
-            if !ring_clearance(&cand, env, ccfg).is_clear() {
+            if !ring_clearance(&cand, flown, env, ccfg).is_clear() {
                 return None;
             }
             let repair = match (raise_m > 0.0, widen_m > 0.0) {
@@ -513,13 +523,27 @@ fn repair_ring(
         })
 }
 
-/// Samples a full ring every `spacing_m` of arc and returns its clearance report.
-fn ring_clearance(ring: &Ring, env: &Environment, ccfg: &ClearanceConfig) -> ClearanceReport {
-    let n = ((std::f64::consts::TAU * ring.radius_m / ccfg.path_sample_spacing_m).ceil() as usize)
-        .max(8);
-    let pts: Vec<Point3<f64>> = (0..n)
-        .map(|k| ring.point_at(std::f64::consts::TAU * k as f64 / n as f64))
+/// The clearance of a ring as it is flown: the closed polygon through its waypoints, sampled every `ccfg.path_sample_spacing_m`. Its chords cut inside the
+/// circle (by R·(1 − cos(π/n)), 5 cm for the default ring), which matters for the base ring,
+/// level with the rock.
+fn ring_clearance(
+    ring: &Ring,
+    flown: &FlownRing,
+    env: &Environment,
+    ccfg: &ClearanceConfig,
+) -> ClearanceReport {
+    let (start_azimuth_rad, n) = (flown.start_azimuth_rad, flown.waypoints);
+    let corners: Vec<Point3<f64>> = (0..n)
+        .map(|j| ring.point_at(start_azimuth_rad + std::f64::consts::TAU * j as f64 / n as f64))
         .collect();
+    let mut pts = Vec::new();
+    for (j, a) in corners.iter().enumerate() {
+        let b = corners[(j + 1) % n];
+        let samples = ((b - a).norm() / ccfg.path_sample_spacing_m)
+            .ceil()
+            .max(1.0) as usize;
+        pts.extend((0..samples).map(|k| a + (b - a) * (k as f64 / samples as f64)));
+    }
     env.check_points(pts.iter(), ccfg)
 }
 
@@ -531,7 +555,43 @@ fn ring_clearance(ring: &Ring, env: &Environment, ccfg: &ClearanceConfig) -> Cle
 /// flies level at the higher of the start and first-ring heights. Fails with
 /// [`PlanError::TargetBelowTerrain`] if the cylinder's centre is underground, and with
 /// [`PlanError::Clearance`] if no repair within `ccfg.max_raise_m` works.
+///
+/// When the base ring makes the plan fail (its approach or transitions blocked), the plan is
+/// made again without it, and [`Repair::DroppedRing`] says so: the paper's rings alone still
+/// map the rock.
 pub fn plan_mapping_rings_clear(
+    cylinder: &VerticalCylinder,
+    start: &Waypoint,
+    camera: &CameraConfig,
+    cfg: &MappingRingConfig,
+    env: &Environment,
+    ccfg: &ClearanceConfig,
+) -> Result<RingPlan, PlanError> {
+    match plan_rings_clear_once(cylinder, start, camera, cfg, env, ccfg) {
+        Err(with_base) if cfg.base_ring.enabled => {
+            let paper = MappingRingConfig {
+                base_ring: BaseRingConfig {
+                    enabled: false,
+                    ..cfg.base_ring
+                },
+                ..*cfg
+            };
+            let mut plan = plan_rings_clear_once(cylinder, start, camera, &paper, env, ccfg)?;
+            plan.repairs.insert(
+                0,
+                Repair::DroppedRing {
+                    ring: 0,
+                    reason: with_base.to_string(),
+                },
+            );
+            Ok(plan)
+        }
+        other => other,
+    }
+}
+
+/// One attempt of [`plan_mapping_rings_clear`] with `cfg` as given.
+fn plan_rings_clear_once(
     cylinder: &VerticalCylinder,
     start: &Waypoint,
     camera: &CameraConfig,
@@ -546,23 +606,32 @@ pub fn plan_mapping_rings_clear(
         cfg.below_terrain_tolerance_m,
     )?;
     let plan = plan_mapping_rings(cylinder, start, camera, cfg)?;
-    let half_scan = 0.5 * cfg.vertical_scan_deg.to_radians();
+    let flown = FlownRing {
+        start_azimuth_rad: plan.start_azimuth_rad,
+        waypoints: cfg.waypoints_per_ring,
+        half_scan_rad: 0.5 * cfg.vertical_scan_deg.to_radians(),
+    };
     let mut repairs = Vec::new();
     let mut rings = Vec::with_capacity(plan.rings.len());
     for (k, ring) in plan.rings.iter().enumerate() {
-        let report = ring_clearance(ring, env, ccfg);
+        let report = ring_clearance(ring, &flown, env, ccfg);
         if report.is_clear() {
             rings.push(*ring);
             continue;
         }
         let base = (cfg.base_ring.enabled && k == 0).then_some(&cfg.base_ring);
-        match repair_ring(ring, k, base, cylinder, half_scan, env, ccfg) {
+        match repair_ring(ring, k, base, cylinder, &flown, env, ccfg) {
             Some((cand, rep)) => {
                 rings.push(cand);
                 repairs.push(rep);
             }
             // The base ring is an extra: without it the paper's rings still map the rock.
-            None if base.is_some() => repairs.push(Repair::DroppedRing { ring: k }),
+            None if base.is_some() => repairs.push(Repair::DroppedRing {
+                ring: k,
+                reason: report
+                    .to_error("no widening or raise within the base ring's limits clears it")
+                    .to_string(),
+            }),
             None => {
                 return Err(report.to_error(format!(
                     "ring {k} at z = {:.2} m: neither sliding out nor raising by up to {} m clears it",

@@ -232,8 +232,8 @@ fn blocked_ring_is_rejected_with_a_reason() {
             source_name,
             ..
         } => {
-            // Ring 0, the base ring, is dropped when blocked; the paper's first ring is not.
-            assert!(reason.contains("ring 1"), "{reason}");
+            // The base ring is dropped when blocked; the paper's first ring then fails.
+            assert!(reason.contains("ring 0"), "{reason}");
             assert_eq!(source_name, "obstacle 0");
         }
         other => panic!("unexpected {other}"),
@@ -427,4 +427,75 @@ fn bad_input_gives_clear_errors() {
     };
     let err = Environment::new(None, &[bad_mesh]).unwrap_err();
     assert!(err.to_string().contains("obstacle 0"), "{err}");
+}
+
+/// A rock 1.5 m wide at the base ring's height: the base ring (1.5 m out from a 1 m cylinder)
+/// would pass 1 m from it.
+fn wide_rock_env() -> Environment {
+    Environment::new(
+        None,
+        &[Obstacle::Cylinder {
+            center_x_m: 0.0,
+            center_y_m: 0.0,
+            radius_m: 1.5,
+            z_bottom_m: -1.0,
+            z_top_m: 2.5,
+        }],
+    )
+    .unwrap()
+}
+
+#[test]
+fn base_ring_too_close_is_widened_level() {
+    let cfg = PlanningConfig::default();
+    let cyl = VerticalCylinder::new(0.0, 0.0, 1.0, 0.0, 2.5).unwrap();
+    let start = Waypoint::new(Point3::new(-10.0, 0.0, 10.0), 0.0);
+    let plan = plan_mapping_rings_clear(
+        &cyl,
+        &start,
+        &cfg.camera,
+        &cfg.mapping,
+        &wide_rock_env(),
+        &cfg.clearance,
+    )
+    .unwrap();
+    let base = plan.rings[0];
+    assert_eq!(base.camera_pitch_down_deg, 5.0);
+    assert!(
+        (base.z_m - 1.8).abs() < 1e-12,
+        "kept its height: {}",
+        base.z_m
+    );
+    // Its flown polygon (chords cut 1 − cos(π/15) of the radius inside) keeps 1.5 m.
+    let inner = base.radius_m * (std::f64::consts::PI / 15.0).cos();
+    assert!(inner - 1.5 >= 1.5 - 1e-9, "radius {}", base.radius_m);
+    assert!(matches!(
+        plan.repairs[0],
+        Repair::WidenedRing { ring: 0, .. }
+    ));
+}
+
+#[test]
+fn blocked_base_ring_is_dropped_and_the_paper_rings_are_flown() {
+    let mut cfg = PlanningConfig::default();
+    cfg.mapping.base_ring.max_widen_m = 0.0;
+    cfg.mapping.base_ring.max_raise_m = 0.0;
+    let cyl = VerticalCylinder::new(0.0, 0.0, 1.0, 0.0, 2.5).unwrap();
+    let start = Waypoint::new(Point3::new(-10.0, 0.0, 10.0), 0.0);
+    let plan = plan_mapping_rings_clear(
+        &cyl,
+        &start,
+        &cfg.camera,
+        &cfg.mapping,
+        &wide_rock_env(),
+        &cfg.clearance,
+    )
+    .unwrap();
+    assert!(plan.rings.iter().all(|r| r.camera_pitch_down_deg == 55.0));
+    match &plan.repairs[0] {
+        Repair::DroppedRing { ring: 0, reason } => {
+            assert!(reason.contains("obstacle 0"), "{reason}")
+        }
+        other => panic!("unexpected {other:?}"),
+    }
 }
