@@ -160,6 +160,28 @@ fn largest_component(faces: &[[u32; 3]]) -> Vec<[u32; 3]> {
         .collect()
 }
 
+/// `faces` without those that make an edge shared by more than two faces (marching cubes
+/// leaves a few where thin structures touch): at such an edge the first two faces in order
+/// stay and the rest go, and holes left behind are closed like any other.
+fn manifold_faces(faces: &[[u32; 3]]) -> Vec<[u32; 3]> {
+    let mut uses: HashMap<(u32, u32), u8> = HashMap::new();
+    faces
+        .iter()
+        .filter(|f| {
+            let edges =
+                [(f[0], f[1]), (f[1], f[2]), (f[2], f[0])].map(|(a, b)| (a.min(b), a.max(b)));
+            if edges.iter().any(|e| uses.get(e).is_some_and(|&n| n >= 2)) {
+                return false;
+            }
+            for e in edges {
+                *uses.entry(e).or_default() += 1;
+            }
+            true
+        })
+        .copied()
+        .collect()
+}
+
 /// Closes every boundary loop of `mesh` with a fan around the loop's centroid. Returns the
 /// number of loops closed.
 fn fill_holes(mesh: &mut TriangleMesh) -> usize {
@@ -252,7 +274,7 @@ pub fn close_scan(mesh: &TriangleMesh) -> Result<ClosedScan, FragilityError> {
         })
         .copied()
         .collect();
-    let faces = largest_component(&above);
+    let faces = largest_component(&manifold_faces(&above));
     if faces.is_empty() {
         return Err(FragilityError::EmptyMesh {
             mesh: "rock above the neck",
@@ -322,6 +344,17 @@ mod tests {
         mesh.faces
             .retain(|f| f.iter().any(|&v| mesh.positions[v as usize].z > 1e-6));
         mesh
+    }
+
+    #[test]
+    fn a_third_face_on_an_edge_is_dropped() {
+        // Two triangles share edge 0–1; a third on the same edge is dropped, a fourth elsewhere
+        // stays.
+        let faces = [[0, 1, 2], [1, 0, 3], [0, 1, 4], [2, 1, 5]];
+        assert_eq!(
+            manifold_faces(&faces),
+            vec![[0, 1, 2], [1, 0, 3], [2, 1, 5]]
+        );
     }
 
     #[test]

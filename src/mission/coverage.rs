@@ -5,7 +5,9 @@
 //! sees its centre inside the image, within the depth range, at an incidence angle (between the
 //! cell's outward normal and the ray back to the camera) no steeper than the limit. The bottom
 //! band is what shows the rock's base, so it is a band like any other: a flight that only
-//! passes overhead cannot cover it.
+//! passes overhead cannot cover it. The top is a ring of cells on the cylinder's lid, facing
+//! up: a flight that stops once the side is seen, before the rings high enough to look down on
+//! the rock, would leave the rock's top (and its centre of mass) unmapped.
 
 use nalgebra::{Isometry3, Point3, Vector3};
 use scarp_planning::prelude::VerticalCylinder;
@@ -20,6 +22,8 @@ pub struct CoverageConfig {
     pub azimuth_cells: usize,
     /// Cells from bottom to top. Default 6.
     pub height_cells: usize,
+    /// Cells on the lid, around half the radius, facing up. Default 8 (0 turns the lid off).
+    pub top_cells: usize,
     /// Mapping is complete once this fraction of cells is seen. Default 0.9.
     pub threshold: f64,
     /// Steepest accepted incidence, degrees from the cell normal. Default 75.
@@ -33,6 +37,7 @@ impl Default for CoverageConfig {
         Self {
             azimuth_cells: 24,
             height_cells: 6,
+            top_cells: 8,
             threshold: 0.9,
             max_incidence_deg: 75.0,
             max_depth_m: 6.0,
@@ -44,8 +49,10 @@ impl Default for CoverageConfig {
 #[derive(Debug, Clone)]
 pub struct CylinderCoverage {
     config: CoverageConfig,
-    /// Centre and outward unit normal of each cell, azimuth-major.
+    /// Centre and outward unit normal of each cell: the side azimuth-major, then the lid.
     cells: Vec<(Point3<f64>, Vector3<f64>)>,
+    /// How many of `cells` are on the side (the rest are on the lid).
+    side_cells: usize,
     seen: Vec<bool>,
 }
 
@@ -63,10 +70,18 @@ impl CylinderCoverage {
                 cells.push((center, normal));
             }
         }
+        let side_cells = cells.len();
+        for a in 0..config.top_cells {
+            let az = (a as f64 + 0.5) / config.top_cells as f64 * std::f64::consts::TAU;
+            let center = cylinder.axis_point(cylinder.z_top_m)
+                + Vector3::new(az.cos(), az.sin(), 0.0) * (0.5 * cylinder.radius_m);
+            cells.push((center, Vector3::z()));
+        }
         Self {
             config,
             seen: vec![false; cells.len()],
             cells,
+            side_cells,
         }
     }
 
@@ -105,13 +120,28 @@ impl CylinderCoverage {
     /// Fraction of the bottom band's cells seen: how well the base was viewed.
     pub fn bottom_fraction(&self) -> f64 {
         let nh = self.config.height_cells.max(1);
-        let bottom: Vec<bool> = self.seen.iter().step_by(nh).copied().collect();
-        bottom.iter().filter(|&&s| s).count() as f64 / bottom.len() as f64
+        seen_fraction(self.seen[..self.side_cells].iter().step_by(nh))
     }
 
-    /// Whether the seen fraction reached the threshold.
+    /// Fraction of the lid's cells seen (1 without a lid).
+    pub fn top_fraction(&self) -> f64 {
+        seen_fraction(self.seen[self.side_cells..].iter())
+    }
+
+    /// Whether the side's seen fraction, and the lid's, reached the threshold.
     pub fn is_complete(&self) -> bool {
-        self.fraction() >= self.config.threshold
+        seen_fraction(self.seen[..self.side_cells].iter()) >= self.config.threshold
+            && self.top_fraction() >= self.config.threshold
+    }
+}
+
+/// Fraction of `true` in `seen`; 1 when empty (nothing left to see).
+fn seen_fraction<'a>(seen: impl Iterator<Item = &'a bool>) -> f64 {
+    let (hit, all) = seen.fold((0usize, 0usize), |(h, a), &s| (h + usize::from(s), a + 1));
+    if all == 0 {
+        1.0
+    } else {
+        hit as f64 / all as f64
     }
 }
 
@@ -159,8 +189,26 @@ mod tests {
                 &look_at(&high, &Point3::new(0.0, 0.0, 1.0), &Vector3::y()).unwrap(),
             );
         }
-        assert!(ring.is_complete(), "ring {}", ring.fraction());
+        // Level views cover the side but not the lid, so the flight is not done yet.
         assert_eq!(ring.bottom_fraction(), 1.0);
-        assert_eq!(overhead.fraction(), 0.0, "overhead views graze the side");
+        assert_eq!(ring.top_fraction(), 0.0);
+        assert!(!ring.is_complete());
+        for k in 0..12 {
+            let az = f64::from(k) / 12.0 * std::f64::consts::TAU;
+            let eye = Point3::new(3.0 * az.cos(), 3.0 * az.sin(), 4.5);
+            ring.observe(
+                &camera,
+                &look_at(&eye, &Point3::new(0.0, 0.0, 1.5), &Vector3::z()).unwrap(),
+            );
+        }
+        assert!(ring.is_complete(), "ring {}", ring.fraction());
+        // Overhead views see the lid only.
+        assert_eq!(overhead.top_fraction(), 1.0);
+        assert_eq!(
+            overhead.bottom_fraction(),
+            0.0,
+            "overhead views graze the side"
+        );
+        assert!(!overhead.is_complete());
     }
 }

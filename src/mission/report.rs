@@ -31,6 +31,10 @@ pub struct TargetReport {
     pub frames_mapped: usize,
     /// Keyframes in its bundle adjustment.
     pub keyframes: usize,
+    /// Whether the low, level base ring was flown (it is dropped when it cannot be cleared).
+    pub base_ring_flown: bool,
+    /// How the mapping rings were changed to keep clear of terrain and rocks.
+    pub ring_repairs: Vec<scarp_planning::prelude::Repair>,
     /// Fraction of the cylinder's cells seen.
     pub coverage: f64,
     /// Fraction of the cylinder's bottom band seen (the base).

@@ -625,6 +625,14 @@ impl<'a> Mission<'a> {
         }
         match result {
             Ok(rings) => {
+                if let Some(m) = self.targets.get_mut(&id) {
+                    let camera = &self.inputs.config.planning.camera;
+                    m.report.base_ring_flown = rings
+                        .rings
+                        .iter()
+                        .any(|r| r.camera_pitch_down_deg != camera.pitch_down_deg);
+                    m.report.ring_repairs.clone_from(&rings.repairs);
+                }
                 self.ring_plan = Some(rings);
                 self.mapping = Some(MappingSession::new(
                     id,
