@@ -5,6 +5,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, bail};
 use scarp_slam::TriangleMesh;
 
+use crate::fragility::scan::close_scan;
 use crate::fragility::{
     ContactSpec, FragilityConfig, FragilityReport, analyze_detailed, figure::write_figure,
 };
@@ -24,6 +25,11 @@ pub struct FragilityArgs {
     /// Closed pedestal mesh in the rock's frame; the contact is the pedestal's top.
     #[arg(long)]
     pub pedestal: Option<PathBuf>,
+    /// The mesh is an open scan of the rock standing on its pedestal or the ground (z up), as
+    /// `scarp map` and `scarp simulate` write it: find the neck, cut the rock off there and
+    /// close it before the analysis (see `fragility::scan`).
+    #[arg(long, conflicts_with_all = ["pedestal", "contact_height"])]
+    pub scan: bool,
     /// Print the full report as JSON on stdout instead of a summary.
     #[arg(long)]
     pub json: bool,
@@ -139,7 +145,17 @@ pub fn summary(report: &FragilityReport) -> String {
 /// [`FragilityError`]: crate::fragility::FragilityError
 pub fn run(args: FragilityArgs) -> anyhow::Result<()> {
     let config = load_config(&args)?;
-    let mesh = read_mesh(&args.mesh)?;
+    let mut mesh = read_mesh(&args.mesh)?;
+    if args.scan {
+        let closed = close_scan(&mesh)
+            .with_context(|| format!("closing the scan {}", args.mesh.display()))?;
+        tracing::info!(
+            neck_m = closed.contact_height_m,
+            loops = closed.loops_closed,
+            "scan cut at its neck and closed"
+        );
+        mesh = closed.mesh;
+    }
     let pedestal = args.pedestal.as_deref().map(read_mesh).transpose()?;
     let contact = match (&pedestal, args.contact_height) {
         (Some(p), _) => ContactSpec::Pedestal(p),

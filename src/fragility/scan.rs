@@ -160,6 +160,20 @@ fn largest_component(faces: &[[u32; 3]]) -> Vec<[u32; 3]> {
         .collect()
 }
 
+/// For each vertex, the first vertex at a bit-identical position: the analysis welds them,
+/// so the cut and the hole filling must see the same topology it will.
+fn welded_vertices(mesh: &TriangleMesh) -> Vec<u32> {
+    let mut first_at: HashMap<[u32; 3], u32> = HashMap::with_capacity(mesh.positions.len());
+    mesh.positions
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let key = [p.x, p.y, p.z].map(|c| (c + 0.0).to_bits());
+            *first_at.entry(key).or_insert(i as u32)
+        })
+        .collect()
+}
+
 /// `faces` without those that make an edge shared by more than two faces (marching cubes
 /// leaves a few where thin structures touch): at such an edge the first two faces in order
 /// stay and the rest go, and holes left behind are closed like any other.
@@ -265,6 +279,7 @@ fn fan(mesh: &mut TriangleMesh, chain: &[u32]) -> bool {
 /// [`FragilityError::Degenerate`] when no neck is found.
 pub fn close_scan(mesh: &TriangleMesh) -> Result<ClosedScan, FragilityError> {
     let contact_height_m = find_scan_neck(mesh)?;
+    let weld = welded_vertices(mesh);
     let above: Vec<[u32; 3]> = mesh
         .faces
         .iter()
@@ -272,7 +287,8 @@ pub fn close_scan(mesh: &TriangleMesh) -> Result<ClosedScan, FragilityError> {
             f.iter()
                 .all(|&v| f64::from(mesh.positions[v as usize].z) > contact_height_m)
         })
-        .copied()
+        .map(|f| f.map(|v| weld[v as usize]))
+        .filter(|g| g[0] != g[1] && g[1] != g[2] && g[2] != g[0])
         .collect();
     let faces = largest_component(&manifold_faces(&above));
     if faces.is_empty() {
