@@ -506,6 +506,13 @@ pub enum Repair {
         /// Radius increase (m).
         widen_m: f64,
     },
+    /// A terrain-following ring's waypoints were raised over the terrain, by up to this much.
+    FollowedTerrain {
+        /// Ring index.
+        ring: usize,
+        /// Largest lift of a waypoint (m).
+        max_lift_m: f64,
+    },
     /// The base ring could not be cleared (itself, or the path to and from it) and is not
     /// flown.
     DroppedRing {

@@ -214,6 +214,10 @@ pub struct Ring {
     pub band_top_m: f64,
     /// Camera pitch below the horizon flown on this ring (degrees): γ, or the base ring's.
     pub camera_pitch_down_deg: f64,
+    /// The ring's waypoints rise where the terrain under them comes within the clearance
+    /// (the base ring, flown low; see [`plan_mapping_rings_clear`]). `z_m` is then the lowest
+    /// height flown.
+    pub follows_terrain: bool,
 }
 
 impl Ring {
@@ -265,7 +269,7 @@ impl RingPlan {
     }
 
     /// Camera pitch below the horizon (degrees) for a vehicle at height `z_m` while it flies
-    /// this plan: each ring's pitch at its height, linear in height between rings (so the
+    /// this plan: each ring's pitch at its (lowest) height, linear in height between rings (so the
     /// mount slews while the vehicle climbs from ring to ring), and the nearest ring's beyond
     /// the lowest and the highest. `default_deg` when the plan has no rings.
     pub fn camera_pitch_down_deg_at(&self, z_m: f64, default_deg: f64) -> f64 {
@@ -386,6 +390,7 @@ pub fn plan_mapping_rings(
                 band_bottom_m: 0.0,
                 band_top_m: 0.0,
                 camera_pitch_down_deg: pitch_deg,
+                follows_terrain: base.is_some() && k == 0,
             }
             .with_band(cylinder, half_scan)
         })
@@ -448,6 +453,54 @@ fn assemble(
         start_azimuth_rad: start_azimuth,
         repairs,
         clearance: None,
+    }
+}
+
+/// Extra height kept over the terrain by a terrain-following ring, above the clearance (m).
+const TERRAIN_FOLLOWING_MARGIN_M: f64 = 0.1;
+
+/// `p` raised, if needed, so the highest terrain within `ccfg.min_clearance_m` of it
+/// (sampled on a 9 × 9 grid over that disc) lies the clearance plus a margin below.
+fn lifted_over_terrain(p: &Point3<f64>, env: &Environment, ccfg: &ClearanceConfig) -> Point3<f64> {
+    let r = ccfg.min_clearance_m;
+    let mut highest = f64::NEG_INFINITY;
+    for i in -4..=4 {
+        for j in -4..=4 {
+            let (dx, dy) = (r * f64::from(i) / 4.0, r * f64::from(j) / 4.0);
+            if dx * dx + dy * dy <= r * r
+                && let Some(h) = env.terrain_height_at(p.x + dx, p.y + dy)
+            {
+                highest = highest.max(h);
+            }
+        }
+    }
+    Point3::new(
+        p.x,
+        p.y,
+        p.z.max(highest + ccfg.min_clearance_m + TERRAIN_FOLLOWING_MARGIN_M),
+    )
+}
+
+/// Raises the waypoints of the plan's terrain-following rings over the terrain, and records
+/// the largest lift among the plan's repairs.
+fn lift_terrain_following(plan: &mut RingPlan, env: &Environment, ccfg: &ClearanceConfig) {
+    let mut largest: Option<(usize, f64)> = None;
+    for (k, (ring, range)) in plan.rings.iter().zip(&plan.ring_waypoints).enumerate() {
+        if !ring.follows_terrain {
+            continue;
+        }
+        for w in &mut plan.path.waypoints[range.clone()] {
+            let lifted = lifted_over_terrain(&w.position_m, env, ccfg);
+            let lift = lifted.z - w.position_m.z;
+            w.position_m = lifted;
+            if lift > largest.map_or(0.0, |(_, l)| l) {
+                largest = Some((k, lift));
+            }
+        }
+    }
+    if let Some((ring, max_lift_m)) = largest {
+        plan.repairs
+            .push(Repair::FollowedTerrain { ring, max_lift_m });
     }
 }
 
@@ -535,6 +588,13 @@ fn ring_clearance(
     let (start_azimuth_rad, n) = (flown.start_azimuth_rad, flown.waypoints);
     let corners: Vec<Point3<f64>> = (0..n)
         .map(|j| ring.point_at(start_azimuth_rad + std::f64::consts::TAU * j as f64 / n as f64))
+        .map(|p| {
+            if ring.follows_terrain {
+                lifted_over_terrain(&p, env, ccfg)
+            } else {
+                p
+            }
+        })
         .collect();
     let mut pts = Vec::new();
     for (j, a) in corners.iter().enumerate() {
@@ -650,6 +710,7 @@ fn plan_rings_clear_once(
         repairs.clone(),
         None,
     );
+    lift_terrain_following(&mut out, env, ccfg);
     let mut report = env.check_path(&out.path, ccfg);
     if !report.is_clear() {
         // Approach level at the higher altitude, then straight down or up to the first ring.
@@ -662,7 +723,7 @@ fn plan_rings_clear_once(
         };
         if (via_pos - start.position_m).norm() > 1e-6 && (via_pos - first).norm() > 1e-6 {
             let via = Waypoint::new(via_pos, start.yaw_rad);
-            let alt = assemble(
+            let mut alt = assemble(
                 cylinder,
                 start,
                 rings,
@@ -671,6 +732,7 @@ fn plan_rings_clear_once(
                 repairs,
                 Some(via),
             );
+            lift_terrain_following(&mut alt, env, ccfg);
             let alt_report = env.check_path(&alt.path, ccfg);
             if alt_report.is_clear() {
                 out = alt;

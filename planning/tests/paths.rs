@@ -499,3 +499,45 @@ fn blocked_base_ring_is_dropped_and_the_paper_rings_are_flown() {
         other => panic!("unexpected {other:?}"),
     }
 }
+
+#[test]
+fn base_ring_on_a_scarp_follows_the_terrain() {
+    // A 1.5 m step (a scarp, 1 m wide) 1.5 m east of a rock whose ground is at 0: a level
+    // base ring 1.8 m over the cylinder's bottom would fly 0.3 m over the upper side.
+    let step = |x: f64| 1.5 * ((x - 1.5) / 1.0).clamp(0.0, 1.0);
+    let terrain = Heightfield::from_fn(-20.0, -20.0, 0.25, 161, 161, |x, _| step(x)).unwrap();
+    let env = Environment::new(Some(terrain), &[]).unwrap();
+    let cfg = PlanningConfig::default();
+    let cyl = VerticalCylinder::new(0.0, 0.0, 0.8, 0.0, 2.5).unwrap();
+    let start = Waypoint::new(Point3::new(-8.0, 0.0, 10.0), 0.0);
+    let plan = plan_mapping_rings_clear(
+        &cyl,
+        &start,
+        &cfg.camera,
+        &cfg.mapping,
+        &env,
+        &cfg.clearance,
+    )
+    .unwrap();
+    println!("repairs: {:?}", plan.repairs);
+    assert!(plan.rings[0].follows_terrain);
+    let base = &plan.path.waypoints[plan.ring_waypoints[0].clone()];
+    // Low where the ground is low, lifted over the step, and clear everywhere.
+    let west = base
+        .iter()
+        .map(|w| w.position_m.x)
+        .fold(f64::INFINITY, f64::min);
+    let low = base.iter().find(|w| w.position_m.x == west).unwrap();
+    assert!((low.position_m.z - 1.8).abs() < 1e-9, "{low:?}");
+    let high = base
+        .iter()
+        .map(|w| w.position_m.z)
+        .fold(f64::NEG_INFINITY, f64::max);
+    assert!(high >= 1.5 + 1.5, "highest base waypoint {high}");
+    assert!(
+        plan.repairs
+            .iter()
+            .any(|r| matches!(r, Repair::FollowedTerrain { ring: 0, .. }))
+    );
+    assert!(plan.clearance.unwrap().is_clear());
+}
