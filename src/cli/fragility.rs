@@ -240,6 +240,7 @@ mod tests {
             up: None,
             contact_height: None,
             pedestal: None,
+            scan: false,
             json: true,
             figure: Some(figure.clone()),
             config: None,
@@ -247,11 +248,26 @@ mod tests {
         };
         run(args).unwrap();
         assert!(std::fs::read_to_string(figure).unwrap().contains("<svg"));
+        // A closed block is not a scan of a rock on a pedestal: there is no neck to cut at.
+        let not_a_scan = FragilityArgs {
+            mesh: dir.path().join("block.obj"),
+            up: None,
+            contact_height: None,
+            pedestal: None,
+            scan: true,
+            json: false,
+            figure: None,
+            config: None,
+            seed: None,
+        };
+        let e = run(not_a_scan).unwrap_err();
+        assert!(format!("{e:#}").contains("closing the scan"), "{e:#}");
         let missing = FragilityArgs {
             mesh: dir.path().join("missing.obj"),
             up: None,
             contact_height: None,
             pedestal: None,
+            scan: false,
             json: false,
             figure: None,
             config: None,
@@ -271,6 +287,7 @@ mod tests {
             up: Some([0.0, 0.0, 1.0]),
             contact_height: Some(-0.06),
             pedestal: None,
+            scan: false,
             json: true,
             figure: Some(figure.clone()),
             config: None,
