@@ -43,7 +43,7 @@ use scarp_export::tum::{StampedPose, write_tum_trajectory};
 use scarp_slam::TriangleMesh;
 use scarp_slam::mapping::{
     KeyframeSet, ModelTracker, ModelTrackingConfig, RefineConfig, TrackingReferenceKind,
-    refine_keyframes,
+    refine_keyframes, reprojection_stats,
 };
 use scarp_slam::meshing::{MeshingConfig, extract_mesh};
 use scarp_slam::tsdf::{Roi, TsdfConfig, TsdfVolume};
@@ -256,6 +256,13 @@ fn refine(
         extra.insert(
             "ate_rmse_after_ba_m".into(),
             ate(&refined.world_from_camera).into(),
+        );
+        // The landmark observations re-triangulated with the true poses: their own noise and
+        // bias, whatever the odometry and the adjustment did.
+        let residuals = reprojection_stats(&seq.camera, truth, &refined.tracks);
+        extra.insert(
+            "ba_landmark_residuals_truth".into(),
+            serde_json::to_value(residuals)?,
         );
     }
     if let Some(name) = &args.world {
