@@ -181,6 +181,10 @@ struct StoredKeyframes {
     set: KeyframeSet,
     timestamps_s: Vec<f64>,
     truth: Vec<Option<Isometry3<f64>>>,
+    /// The sequence index of each keyframe.
+    frame_indices: Vec<usize>,
+    /// Every frame's odometry pose (filled in after tracking).
+    odometry: Vec<StampedPose>,
 }
 
 /// Runs [`refine_keyframes`] and adds its figures (and, with ground truth, the before/after
@@ -265,6 +269,44 @@ fn refine(
             serde_json::to_value(residuals)?,
         );
     }
+    // Every frame at its odometry pose corrected by its keyframe's adjustment: a frame is
+    // tracked against the last keyframe, so it moves with that keyframe.
+    let corrected = correct_all_frames(keyframes, &refined.world_from_camera);
+    let started = Instant::now();
+    let (mesh_all_before, mesh_all_after) =
+        fuse_all_frames(args, seq, &config, keyframes, &corrected)?;
+    extra.insert(
+        "reintegrate_all_frames_ms".into(),
+        (started.elapsed().as_secs_f64() * 1e3).into(),
+    );
+    let corrected_stamped: Vec<StampedPose> = keyframes
+        .odometry
+        .iter()
+        .zip(&corrected)
+        .map(|(o, p)| StampedPose {
+            timestamp_s: o.timestamp_s,
+            world_from_camera: *p,
+        })
+        .collect();
+    let path = args.out.join("trajectory_ba.txt");
+    write_tum_trajectory(
+        &path,
+        &corrected_stamped,
+        "scarp map --ba: every frame's world_from_camera, odometry corrected by its keyframe's \
+         bundle adjustment",
+    )
+    .with_context(|| format!("writing {}", path.display()))?;
+    let all_truth = self::stamped(seq, |e| e.world_from_camera_truth);
+    if let Some(gt) = &all_truth {
+        let eval = TrajectoryEvalConfig::default();
+        extra.insert(
+            "ate_rmse_all_frames_after_ba_m".into(),
+            evaluate_trajectory(gt, &corrected_stamped, &eval)
+                .ok()
+                .map(|m| m.ate_rmse_m)
+                .into(),
+        );
+    }
     if let Some(name) = &args.world {
         let world =
             World::from_name_or_path(name).with_context(|| format!("loading world `{name}`"))?;
@@ -279,38 +321,117 @@ fn refine(
             ..MeshEvalConfig::default()
         };
         // The maps live in the odometry's frame (anchored at the first state estimate, which
-        // is decimetres off): each mesh is first moved by the SE(3) alignment of its keyframe
+        // is decimetres off): each mesh is first moved by the SE(3) alignment of its camera
         // positions onto the ground truth (the ATE's alignment), so the F-score measures the
         // shape, not the GPS error.
-        let score = |mesh: &TriangleMesh, poses: &[Isometry3<f64>]| {
-            let mut aligned = mesh.clone();
-            if let Some(truth) = truth.as_ref() {
-                let source: Vec<_> = poses.iter().map(|p| p.translation.vector).collect();
-                let target: Vec<_> = truth.iter().map(|p| p.translation.vector).collect();
-                let s = umeyama(&source, &target, false).ok()?;
-                aligned.transform(&Isometry3::from_parts(
-                    s.translation.into(),
-                    UnitQuaternion::from_rotation_matrix(&s.rotation),
-                ));
-            }
-            evaluate_mesh(&aligned, &rock.mesh, &eval, None)
-                .map(|e| e.fscore)
-                .ok()
-        };
+        let score =
+            |mesh: &TriangleMesh, poses: &[Isometry3<f64>], truth: Option<&Vec<Isometry3<f64>>>| {
+                let mut aligned = mesh.clone();
+                if let Some(truth) = truth {
+                    let source: Vec<_> = poses.iter().map(|p| p.translation.vector).collect();
+                    let target: Vec<_> = truth.iter().map(|p| p.translation.vector).collect();
+                    let s = umeyama(&source, &target, false).ok()?;
+                    aligned.transform(&Isometry3::from_parts(
+                        s.translation.into(),
+                        UnitQuaternion::from_rotation_matrix(&s.rotation),
+                    ));
+                }
+                evaluate_mesh(&aligned, &rock.mesh, &eval, None)
+                    .map(|e| e.fscore)
+                    .ok()
+            };
         if let Some(before) = &refined.mesh_before {
             extra.insert(
-                "fscore_before_ba".into(),
-                score(before, &keyframes.set.world_from_camera_odometry).into(),
+                "fscore_keyframes_before_ba".into(),
+                score(
+                    before,
+                    &keyframes.set.world_from_camera_odometry,
+                    truth.as_ref(),
+                )
+                .into(),
             );
         }
         extra.insert(
+            "fscore_keyframes_after_ba".into(),
+            score(&refined.mesh, &refined.world_from_camera, truth.as_ref()).into(),
+        );
+        let all_truth: Option<Vec<Isometry3<f64>>> = all_truth
+            .as_ref()
+            .map(|gt| gt.iter().map(|p| p.world_from_camera).collect());
+        let odometry: Vec<Isometry3<f64>> = keyframes
+            .odometry
+            .iter()
+            .map(|p| p.world_from_camera)
+            .collect();
+        extra.insert(
+            "fscore_before_ba".into(),
+            score(&mesh_all_before, &odometry, all_truth.as_ref()).into(),
+        );
+        extra.insert(
             "fscore_after_ba".into(),
-            score(&refined.mesh, &refined.world_from_camera).into(),
+            score(&mesh_all_after, &corrected, all_truth.as_ref()).into(),
         );
         extra.insert("fscore_tau_m".into(), args.tau.into());
         extra.insert("fscore_rock_id".into(), rock.id.into());
     }
-    Ok((refined.mesh, refined.mesh_ms))
+    Ok((mesh_all_after, refined.mesh_ms))
+}
+
+/// Every frame's odometry pose moved by the bundle adjustment's correction of the last keyframe
+/// at or before it: `refined_kf · odometry_kf⁻¹ · odometry_frame`.
+fn correct_all_frames(
+    keyframes: &StoredKeyframes,
+    refined: &[Isometry3<f64>],
+) -> Vec<Isometry3<f64>> {
+    let mut k = 0;
+    keyframes
+        .odometry
+        .iter()
+        .enumerate()
+        .map(|(i, frame)| {
+            while k + 1 < keyframes.frame_indices.len() && keyframes.frame_indices[k + 1] <= i {
+                k += 1;
+            }
+            match (
+                refined.get(k),
+                keyframes.set.world_from_camera_odometry.get(k),
+            ) {
+                (Some(after), Some(before)) => after * before.inverse() * frame.world_from_camera,
+                _ => frame.world_from_camera,
+            }
+        })
+        .collect()
+}
+
+/// Fuses every frame of the sequence at its odometry pose and at its corrected pose, into two
+/// fresh volumes with the same settings, and meshes both (before, after).
+fn fuse_all_frames(
+    args: &MapArgs,
+    seq: &Sequence,
+    config: &RefineConfig,
+    keyframes: &StoredKeyframes,
+    corrected: &[Isometry3<f64>],
+) -> anyhow::Result<(TriangleMesh, TriangleMesh)> {
+    let mut before = TsdfVolume::new(config.tsdf.clone())?;
+    let mut after = TsdfVolume::new(config.tsdf.clone())?;
+    let bar = super::progress_bar(seq.len() as u64, "re-fusing");
+    for (i, (odometry, pose)) in keyframes.odometry.iter().zip(corrected).enumerate() {
+        let frame = seq
+            .load_frame(i)
+            .with_context(|| format!("{}: loading frame {i}", args.sequence.display()))?;
+        before
+            .integrate(&frame, &seq.camera, &odometry.world_from_camera)
+            .with_context(|| format!("integrating frame {i}"))?;
+        after
+            .integrate(&frame, &seq.camera, pose)
+            .with_context(|| format!("integrating frame {i}"))?;
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    Ok((
+        extract_mesh(&before, &config.meshing),
+        extract_mesh(&after, &config.meshing),
+    ))
 }
 
 /// Fuses every frame at its `groundtruth.txt` or `estimate.txt` pose; returns the volume and
@@ -379,6 +500,8 @@ fn fuse_with_odometry(
         set: KeyframeSet::default(),
         timestamps_s: Vec::new(),
         truth: Vec::new(),
+        frame_indices: Vec::new(),
+        odometry: Vec::new(),
     });
     let bar = super::progress_bar(seq.len() as u64, "tracking");
     let mut integrate_ms = Vec::with_capacity(seq.len());
@@ -425,6 +548,7 @@ fn fuse_with_odometry(
                 stored.set.frames.push(frame);
                 stored.timestamps_s.push(entry.timestamp_s);
                 stored.truth.push(entry.world_from_camera_truth);
+                stored.frame_indices.push(i);
             }
         }
         poses.push(StampedPose {
@@ -467,6 +591,9 @@ fn fuse_with_odometry(
         if let Some(estimate) = stamped(seq, |e| e.world_from_camera_estimate) {
             extra.insert("estimate_ate_rmse_m".into(), ate(&estimate).into());
         }
+    }
+    if let Some(stored) = stored.as_mut() {
+        stored.odometry = poses;
     }
     Ok((tracker.into_volume(), integrate_ms, extra, stored))
 }

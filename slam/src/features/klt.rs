@@ -234,7 +234,18 @@ pub fn track_points_warped(
     let levels = prev.levels().min(config.pyramid_levels);
     Ok(points
         .par_iter()
-        .map(|&p| track_with_check(prev, next, p, Vector2::zeros(), &linear, &inverse, levels, config))
+        .map(|&p| {
+            track_with_check(
+                prev,
+                next,
+                p,
+                Vector2::zeros(),
+                &linear,
+                &inverse,
+                levels,
+                config,
+            )
+        })
         .collect())
 }
 

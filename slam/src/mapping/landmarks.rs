@@ -234,7 +234,11 @@ fn predict(
     if !camera.in_bounds(&predicted, margin) {
         return None;
     }
-    let measured = depth_at(views[k].depth_m, &predicted.coords, config.max_depth_spread_ratio)?;
+    let measured = depth_at(
+        views[k].depth_m,
+        &predicted.coords,
+        config.max_depth_spread_ratio,
+    )?;
     if (measured - in_camera.z).abs() > config.max_occlusion_depth_ratio * in_camera.z {
         return None;
     }
@@ -434,11 +438,7 @@ fn surface_normal(
                 .and_then(|(u, v)| depth_m.get(u, v))
                 .map_or(0.0, |&d| f64::from(d));
             if d > 0.0 && d.is_finite() {
-                points.push(
-                    camera
-                        .unproject(&Point2::new(u as f64, v as f64), d)
-                        .coords,
-                );
+                points.push(camera.unproject(&Point2::new(u as f64, v as f64), d).coords);
             }
         }
     }
@@ -456,10 +456,17 @@ fn surface_normal(
         .column(eigen.eigenvalues.imin())
         .into_owned();
     let limit = config.silhouette_depth_ratio * centre_depth_m;
-    if !points.iter().all(|p| (p - mean).dot(&normal).abs() <= limit) {
+    if !points
+        .iter()
+        .all(|p| (p - mean).dot(&normal).abs() <= limit)
+    {
         return None;
     }
-    let normal = if normal.dot(&mean) > 0.0 { -normal } else { normal };
+    let normal = if normal.dot(&mean) > 0.0 {
+        -normal
+    } else {
+        normal
+    };
     normal.iter().all(|v| v.is_finite()).then_some(normal)
 }
 
@@ -472,7 +479,10 @@ fn validate(config: &LandmarkConfig) -> Result<(), MappingError> {
         ("min_track_distance_px", config.min_track_distance_px),
         ("max_prediction_error_px", config.max_prediction_error_px),
         ("roi_margin_m", config.roi_margin_m),
-        ("max_occlusion_depth_ratio", config.max_occlusion_depth_ratio),
+        (
+            "max_occlusion_depth_ratio",
+            config.max_occlusion_depth_ratio,
+        ),
         ("silhouette_depth_ratio", config.silhouette_depth_ratio),
         ("max_depth_spread_ratio", config.max_depth_spread_ratio),
     ] {

@@ -31,20 +31,20 @@ use crate::{PinholeCamera, RgbdFrame, TriangleMesh};
 pub struct RefineConfig {
     /// Landmark tracking. Default [`LandmarkConfig::default`].
     pub landmarks: LandmarkConfig,
-    /// Pixel and depth noise of the landmark observations. Default: 0.3 px (landmarks are
-    /// matched from their anchor keyframe with a predicted warp; on the default orbit their
-    /// residuals against the true poses have an RMS of 0.11 px and a 90th percentile of
-    /// 0.17 px, so 0.3 px leaves room for the odometry poses they are predicted from; the old
+    /// Pixel and depth noise of the landmark observations. Default: 0.15 px (landmarks are
+    /// matched from their anchor keyframe with a predicted warp; on the default orbit, seeds
+    /// 0–2, their residuals against the true poses have an RMS of 0.11 px and a 90th
+    /// percentile of 0.17 px; 0.3 px gave the odometry priors too much say, and the old
     /// keyframe-to-keyframe chains needed 2 px), 0.045 m (the simulated stereo depth σ at
     /// 4.5 m).
     pub noise: KeyframeNoise,
-    /// The solver. Default [`LmConfig::default`] with a Huber loss at 2 (whitened units, so
-    /// 2 px) and at most 30 iterations.
+    /// The solver. Default [`LmConfig::default`] with a Huber loss at 2 (whitened units: two
+    /// pixel σ) and at most 30 iterations.
     pub solver: LmConfig,
     /// After a first solve, observations whose reprojection error exceeds this are removed
     /// (with landmarks left with fewer than `landmarks.min_observations` observations) and the
     /// adjustment is solved again from the first solution, pixels; `None` solves once.
-    /// Default 1 px (over three σ of the default `noise`).
+    /// Default 0.75 px (five σ of the default `noise`).
     pub reject_residual_px: Option<f64>,
     /// σ of the GPS/IMU position prior per axis, metres. Default 0.8 (the simulated estimator's
     /// vertical random walk; its horizontal one is 0.5).
@@ -72,7 +72,7 @@ impl Default for RefineConfig {
         Self {
             landmarks: LandmarkConfig::default(),
             noise: KeyframeNoise {
-                pixel_sigma_px: 0.3,
+                pixel_sigma_px: 0.15,
                 depth_sigma_m: 0.045,
             },
             solver: LmConfig {
@@ -83,7 +83,7 @@ impl Default for RefineConfig {
             gps_sigma_m: 0.8,
             attitude_sigma_deg: 2.0,
             odometry_information_scale: 0.1,
-            reject_residual_px: Some(1.0),
+            reject_residual_px: Some(0.75),
             tsdf: TsdfConfig::default(),
             meshing: MeshingConfig::default(),
             mesh_before: false,
@@ -367,8 +367,10 @@ fn reject_outliers(
         }
         let index = kept.points.len();
         kept.points.push(*point);
-        kept.observations
-            .extend(good.into_iter().map(|o| KeyframeObservation { point: index, ..o }));
+        kept.observations.extend(
+            good.into_iter()
+                .map(|o| KeyframeObservation { point: index, ..o }),
+        );
     }
     kept
 }

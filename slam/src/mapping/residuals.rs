@@ -118,8 +118,7 @@ pub fn reprojection_stats(
         if group.len() < 2 {
             continue;
         }
-        let initial =
-            first_pose * camera.unproject(&Point2::from(group[0].pixel), first_depth);
+        let initial = first_pose * camera.unproject(&Point2::from(group[0].pixel), first_depth);
         let Some(point) =
             triangulate_point(camera, world_from_camera, group, None, &initial.coords, 10)
         else {
