@@ -662,6 +662,56 @@ mod tests {
     }
 
     #[test]
+    fn guided_tracking_recovers_a_far_warped_match_from_its_prediction() {
+        // next(q) = prev(A⁻¹(q − c − t) + c): a 10° rotation, 15% zoom and a 47 px shift,
+        // searched from a prediction 2 px off with two pyramid levels.
+        let (angle, scale) = (10f32.to_radians(), 1.15f32);
+        let a = Matrix2::new(angle.cos(), -angle.sin(), angle.sin(), angle.cos()) * scale;
+        let a_inv = a.try_inverse().unwrap();
+        let (c, t) = (Vector2::new(160.0f32, 120.0), Vector2::new(40.0f32, -25.0));
+        let prev = image(320, 240, texture);
+        let next = image(320, 240, |x, y| {
+            let q = a_inv * (Vector2::new(x, y) - c - t) + c;
+            texture(q.x, q.y)
+        });
+        let config = KltConfig {
+            window_px: 15,
+            pyramid_levels: 2,
+            ..KltConfig::default()
+        };
+        let (prev_pyramid, next_pyramid) = (KltPyramid::new(&prev, 2), KltPyramid::new(&next, 2));
+        let points: Vec<_> = [(130.0f32, 100.0f32), (150.0, 130.0), (175.0, 110.0)]
+            .iter()
+            .map(|&(x, y)| Point2::new(x, y))
+            .collect();
+        let truth: Vec<Point2<f32>> = points
+            .iter()
+            .map(|p| Point2::from(a * (p.coords - c) + c + t))
+            .collect();
+        let guided: Vec<GuidedPoint> = points
+            .iter()
+            .zip(&truth)
+            .map(|(p, q)| GuidedPoint {
+                position: *p,
+                predicted: Point2::new(q.x + 1.5, q.y - 1.5),
+                next_from_prev_linear: a,
+            })
+            .collect();
+        let tracks = track_points_guided(&prev_pyramid, &next_pyramid, &guided, &config).unwrap();
+        for (track, q) in tracks.iter().zip(&truth) {
+            assert_eq!(track.status, KltStatus::Tracked, "{track:?}");
+            assert!((track.position - q).norm() < 0.05, "{track:?} vs {q:?}");
+        }
+        // A singular warp is refused per point.
+        let singular = GuidedPoint {
+            next_from_prev_linear: Matrix2::zeros(),
+            ..guided[0]
+        };
+        let refused = track_points_guided(&prev_pyramid, &next_pyramid, &[singular], &config);
+        assert_eq!(refused.unwrap()[0].status, KltStatus::Untextured);
+    }
+
+    #[test]
     fn forward_backward_rejects_occluded_points() {
         let (dx, dy) = (3.0f32, 2.0f32);
         let prev = image(200, 160, texture);
