@@ -22,8 +22,12 @@
 //!     --roi cyl:-12.0234,8.0438,-4,4,2.5 --out /tmp/map_ba --json
 //! ```
 //!
-//! (`ate_rmse_m` against `estimate_ate_rmse_m`; `ate_rmse_before_ba_m` / `_after_ba_m` and
-//! `fscore_before_ba` / `_after_ba` over the keyframes). The ROI is tall because the odometry
+//! (`ate_rmse_m` against `estimate_ate_rmse_m`; `ate_rmse_before_ba_m` / `_after_ba_m` over the
+//! keyframes, the BA's variables; `ate_rmse_all_frames_after_ba_m` over every frame, to compare
+//! with `ate_rmse_m`; `fscore_before_ba` / `_after_ba` of every frame fused at its odometry pose
+//! and at that pose corrected by its keyframe's adjustment; `fscore_keyframes_before_ba` /
+//! `_after_ba` of the keyframes alone; `ba_landmark_residuals_truth`: the landmark observations
+//! re-triangulated with the true poses). The ROI is tall because the odometry
 //! map is anchored at the first state estimate, which can be a metre or more off vertically.
 //! `tests/map_odometry_cli.rs` runs a reduced 48-frame version.
 
@@ -96,9 +100,10 @@ pub struct MapArgs {
     #[arg(long, value_enum, default_value = "keyframe")]
     pub tracking_reference: TrackingReferenceArg,
     /// With `--poses odometry`: refine the keyframes (KLT landmarks on and around the ROI, bundle
-    /// adjustment with odometry and GPS/IMU priors), re-integrate them with the refined poses and
-    /// mesh that. `map.json` then reports the ATE (keyframes) and, with `--world`, the target's
-    /// mesh F-score before and after.
+    /// adjustment with odometry and GPS/IMU priors), move every frame by its keyframe's
+    /// correction (`trajectory_ba.txt`), re-integrate all frames with those poses and mesh that.
+    /// `map.json` then reports the ATE (keyframes and all frames) and, with `--world`, the
+    /// target's mesh F-score before and after (all frames, and keyframes alone).
     #[arg(long)]
     pub ba: bool,
     /// A TOML file of `--ba` settings (the fields of `scarp_slam::mapping::RefineConfig`:

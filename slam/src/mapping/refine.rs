@@ -8,6 +8,9 @@
 //!   information (scaled by `odometry_information_scale`);
 //! - GPS/IMU absolute priors from the state estimate on every keyframe, which fix the gauge and
 //!   keep the geo-reference.
+//!
+//! After a first solve, observations that reproject farther than `reject_residual_px` are
+//! dropped and the adjustment is solved again.
 
 use std::time::Instant;
 
@@ -54,8 +57,9 @@ pub struct RefineConfig {
     pub attitude_sigma_deg: f64,
     /// The odometry's information is multiplied by this before it becomes a relative prior:
     /// its pixels are treated as independent, which makes it overconfident. Default 0.1
-    /// (0.01 let the landmarks pull the default orbit's ATE from 3.7 to 9.9 mm; 1.0 leaves the
-    /// poses where odometry put them).
+    /// (chosen with the earlier keyframe-to-keyframe landmarks, where 0.01 let them pull the
+    /// default orbit's ATE from 3.7 to 9.9 mm and 1.0 left the poses where odometry put them;
+    /// not re-tuned for the anchor-matched landmarks).
     pub odometry_information_scale: f64,
     /// The volume re-integrated with the refined poses (voxel size, truncation, ROI; the ROI
     /// also limits where landmarks are started). Default [`TsdfConfig::default`].
