@@ -162,7 +162,9 @@ pub fn run(args: MapArgs) -> anyhow::Result<()> {
             let (volume, integrate_ms, mut extra, keyframes) =
                 fuse_with_odometry(&args, &seq, config.clone())?;
             let refined = match keyframes {
-                Some(keyframes) => Some(refine(&args, &seq, config, &keyframes, &mut extra)?),
+                Some(keyframes) => Some(refine(
+                    &args, &seq, config, &volume, &keyframes, &mut extra,
+                )?),
                 None => None,
             };
             finish(&args, &seq, &volume, integrate_ms, extra, refined)
@@ -193,11 +195,13 @@ struct StoredKeyframes {
 }
 
 /// Runs [`refine_keyframes`] and adds its figures (and, with ground truth, the before/after
-/// ATE and F-scores) to `extra`; returns the refined mesh and its meshing time (ms).
+/// ATE and F-scores) to `extra`; returns the mesh of every frame fused at its corrected pose
+/// and its meshing time (ms).
 fn refine(
     args: &MapArgs,
     seq: &Sequence,
     tsdf: TsdfConfig,
+    odometry_volume: &TsdfVolume,
     keyframes: &StoredKeyframes,
     extra: &mut serde_json::Map<String, serde_json::Value>,
 ) -> anyhow::Result<(TriangleMesh, f64)> {
@@ -278,8 +282,10 @@ fn refine(
     // tracked against the last keyframe, so it moves with that keyframe.
     let corrected = correct_all_frames(keyframes, &refined.world_from_camera);
     let started = Instant::now();
-    let (mesh_all_before, mesh_all_after) =
-        fuse_all_frames(args, seq, &config, keyframes, &corrected)?;
+    // Before: the tracker's own volume, which fused every frame at its odometry pose with the
+    // same settings.
+    let mesh_all_before = extract_mesh(odometry_volume, &config.meshing);
+    let (mesh_all_after, mesh_ms) = fuse_all_frames(args, seq, &config, &corrected)?;
     extra.insert(
         "reintegrate_all_frames_ms".into(),
         (started.elapsed().as_secs_f64() * 1e3).into(),
@@ -379,7 +385,7 @@ fn refine(
         extra.insert("fscore_tau_m".into(), args.tau.into());
         extra.insert("fscore_rock_id".into(), rock.id.into());
     }
-    Ok((mesh_all_after, refined.mesh_ms))
+    Ok((mesh_all_after, mesh_ms))
 }
 
 /// Every frame's odometry pose moved by the bundle adjustment's correction of the last keyframe
@@ -408,35 +414,29 @@ fn correct_all_frames(
         .collect()
 }
 
-/// Fuses every frame of the sequence at its odometry pose and at its corrected pose, into two
-/// fresh volumes with the same settings, and meshes both (before, after).
+/// Fuses every frame of the sequence at its corrected pose into a fresh volume with the
+/// refinement's settings and meshes it; returns the mesh and the meshing time (ms).
 fn fuse_all_frames(
     args: &MapArgs,
     seq: &Sequence,
     config: &RefineConfig,
-    keyframes: &StoredKeyframes,
     corrected: &[Isometry3<f64>],
-) -> anyhow::Result<(TriangleMesh, TriangleMesh)> {
-    let mut before = TsdfVolume::new(config.tsdf.clone())?;
-    let mut after = TsdfVolume::new(config.tsdf.clone())?;
+) -> anyhow::Result<(TriangleMesh, f64)> {
+    let mut volume = TsdfVolume::new(config.tsdf.clone())?;
     let bar = super::progress_bar(seq.len() as u64, "re-fusing");
-    for (i, (odometry, pose)) in keyframes.odometry.iter().zip(corrected).enumerate() {
+    for (i, pose) in corrected.iter().enumerate() {
         let frame = seq
             .load_frame(i)
             .with_context(|| format!("{}: loading frame {i}", args.sequence.display()))?;
-        before
-            .integrate(&frame, &seq.camera, &odometry.world_from_camera)
-            .with_context(|| format!("integrating frame {i}"))?;
-        after
+        volume
             .integrate(&frame, &seq.camera, pose)
             .with_context(|| format!("integrating frame {i}"))?;
         bar.inc(1);
     }
     bar.finish_and_clear();
-    Ok((
-        extract_mesh(&before, &config.meshing),
-        extract_mesh(&after, &config.meshing),
-    ))
+    let started = Instant::now();
+    let mesh = extract_mesh(&volume, &config.meshing);
+    Ok((mesh, started.elapsed().as_secs_f64() * 1e3))
 }
 
 /// Fuses every frame at its `groundtruth.txt` or `estimate.txt` pose; returns the volume and
