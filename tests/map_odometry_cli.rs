@@ -70,9 +70,21 @@ fn odometry_mapping_and_bundle_adjustment() {
     ] {
         assert!(number(&map, key).is_finite(), "{key}");
     }
-    assert!(map["ba_landmarks"].as_u64().unwrap() > 20, "{map}");
+    assert!(map["ba_landmarks"].as_u64().unwrap() > 200, "{map}");
     assert!(number(&map, "ba_final_cost") < number(&map, "ba_initial_cost"));
-    assert!(number(&map, "ate_rmse_after_ba_m") < 0.02);
+    // Landmarks are matched from their anchor keyframe along the odometry's prediction:
+    // re-triangulated with the true poses they reproject within a fraction of a pixel (the
+    // old keyframe-to-keyframe chains gave a median of 0.35 px and a 90th percentile of 1 px).
+    let residuals = &map["ba_landmark_residuals_truth"];
+    assert!(
+        number(residuals, "median_px") < 0.2 && number(residuals, "p90_px") < 0.5,
+        "{residuals}"
+    );
+    let (before, after) = (
+        number(&map, "ate_rmse_before_ba_m"),
+        number(&map, "ate_rmse_after_ba_m"),
+    );
+    assert!(after < before, "BA raised the ATE: {before} -> {after}");
     assert!(dir.path().join("map/keyframes_ba.txt").exists());
     assert!(dir.path().join("map/mesh.ply").exists());
 }

@@ -22,8 +22,12 @@
 //!     --roi cyl:-12.0234,8.0438,-4,4,2.5 --out /tmp/map_ba --json
 //! ```
 //!
-//! (`ate_rmse_m` against `estimate_ate_rmse_m`; `ate_rmse_before_ba_m` / `_after_ba_m` and
-//! `fscore_before_ba` / `_after_ba` over the keyframes). The ROI is tall because the odometry
+//! (`ate_rmse_m` against `estimate_ate_rmse_m`; `ate_rmse_before_ba_m` / `_after_ba_m` over the
+//! keyframes, the BA's variables; `ate_rmse_all_frames_after_ba_m` over every frame, to compare
+//! with `ate_rmse_m`; `fscore_before_ba` / `_after_ba` of every frame fused at its odometry pose
+//! and at that pose corrected by its keyframe's adjustment; `fscore_keyframes_before_ba` /
+//! `_after_ba` of the keyframes alone; `ba_landmark_residuals_truth`: the landmark observations
+//! re-triangulated with the true poses). The ROI is tall because the odometry
 //! map is anchored at the first state estimate, which can be a metre or more off vertically.
 //! `tests/map_odometry_cli.rs` runs a reduced 48-frame version.
 
@@ -43,7 +47,7 @@ use scarp_export::tum::{StampedPose, write_tum_trajectory};
 use scarp_slam::TriangleMesh;
 use scarp_slam::mapping::{
     KeyframeSet, ModelTracker, ModelTrackingConfig, RefineConfig, TrackingReferenceKind,
-    refine_keyframes,
+    refine_keyframes, reprojection_stats,
 };
 use scarp_slam::meshing::{MeshingConfig, extract_mesh};
 use scarp_slam::tsdf::{Roi, TsdfConfig, TsdfVolume};
@@ -96,9 +100,10 @@ pub struct MapArgs {
     #[arg(long, value_enum, default_value = "keyframe")]
     pub tracking_reference: TrackingReferenceArg,
     /// With `--poses odometry`: refine the keyframes (KLT landmarks on and around the ROI, bundle
-    /// adjustment with odometry and GPS/IMU priors), re-integrate them with the refined poses and
-    /// mesh that. `map.json` then reports the ATE (keyframes) and, with `--world`, the target's
-    /// mesh F-score before and after.
+    /// adjustment with odometry and GPS/IMU priors), move every frame by its keyframe's
+    /// correction (`trajectory_ba.txt`), re-integrate all frames with those poses and mesh that.
+    /// `map.json` then reports the ATE (keyframes and all frames) and, with `--world`, the
+    /// target's mesh F-score before and after (all frames, and keyframes alone).
     #[arg(long)]
     pub ba: bool,
     /// A TOML file of `--ba` settings (the fields of `scarp_slam::mapping::RefineConfig`:
@@ -157,7 +162,9 @@ pub fn run(args: MapArgs) -> anyhow::Result<()> {
             let (volume, integrate_ms, mut extra, keyframes) =
                 fuse_with_odometry(&args, &seq, config.clone())?;
             let refined = match keyframes {
-                Some(keyframes) => Some(refine(&args, &seq, config, &keyframes, &mut extra)?),
+                Some(keyframes) => Some(refine(
+                    &args, &seq, config, &volume, &keyframes, &mut extra,
+                )?),
                 None => None,
             };
             finish(&args, &seq, &volume, integrate_ms, extra, refined)
@@ -181,14 +188,20 @@ struct StoredKeyframes {
     set: KeyframeSet,
     timestamps_s: Vec<f64>,
     truth: Vec<Option<Isometry3<f64>>>,
+    /// The sequence index of each keyframe.
+    frame_indices: Vec<usize>,
+    /// Every frame's odometry pose (filled in after tracking).
+    odometry: Vec<StampedPose>,
 }
 
 /// Runs [`refine_keyframes`] and adds its figures (and, with ground truth, the before/after
-/// ATE and F-scores) to `extra`; returns the refined mesh and its meshing time (ms).
+/// ATE and F-scores) to `extra`; returns the mesh of every frame fused at its corrected pose
+/// and its meshing time (ms).
 fn refine(
     args: &MapArgs,
     seq: &Sequence,
     tsdf: TsdfConfig,
+    odometry_volume: &TsdfVolume,
     keyframes: &StoredKeyframes,
     extra: &mut serde_json::Map<String, serde_json::Value>,
 ) -> anyhow::Result<(TriangleMesh, f64)> {
@@ -257,6 +270,53 @@ fn refine(
             "ate_rmse_after_ba_m".into(),
             ate(&refined.world_from_camera).into(),
         );
+        // The landmark observations re-triangulated with the true poses: their own noise and
+        // bias, whatever the odometry and the adjustment did.
+        let residuals = reprojection_stats(&seq.camera, truth, &refined.tracks);
+        extra.insert(
+            "ba_landmark_residuals_truth".into(),
+            serde_json::to_value(residuals)?,
+        );
+    }
+    // Every frame at its odometry pose corrected by its keyframe's adjustment: a frame is
+    // tracked against the last keyframe, so it moves with that keyframe.
+    let corrected = correct_all_frames(keyframes, &refined.world_from_camera);
+    let started = Instant::now();
+    // Before: the tracker's own volume, which fused every frame at its odometry pose with the
+    // same settings.
+    let mesh_all_before = extract_mesh(odometry_volume, &config.meshing);
+    let (mesh_all_after, mesh_ms) = fuse_all_frames(args, seq, &config, &corrected)?;
+    extra.insert(
+        "reintegrate_all_frames_ms".into(),
+        (started.elapsed().as_secs_f64() * 1e3).into(),
+    );
+    let corrected_stamped: Vec<StampedPose> = keyframes
+        .odometry
+        .iter()
+        .zip(&corrected)
+        .map(|(o, p)| StampedPose {
+            timestamp_s: o.timestamp_s,
+            world_from_camera: *p,
+        })
+        .collect();
+    let path = args.out.join("trajectory_ba.txt");
+    write_tum_trajectory(
+        &path,
+        &corrected_stamped,
+        "scarp map --ba: every frame's world_from_camera, odometry corrected by its keyframe's \
+         bundle adjustment",
+    )
+    .with_context(|| format!("writing {}", path.display()))?;
+    let all_truth = self::stamped(seq, |e| e.world_from_camera_truth);
+    if let Some(gt) = &all_truth {
+        let eval = TrajectoryEvalConfig::default();
+        extra.insert(
+            "ate_rmse_all_frames_after_ba_m".into(),
+            evaluate_trajectory(gt, &corrected_stamped, &eval)
+                .ok()
+                .map(|m| m.ate_rmse_m)
+                .into(),
+        );
     }
     if let Some(name) = &args.world {
         let world =
@@ -272,38 +332,111 @@ fn refine(
             ..MeshEvalConfig::default()
         };
         // The maps live in the odometry's frame (anchored at the first state estimate, which
-        // is decimetres off): each mesh is first moved by the SE(3) alignment of its keyframe
+        // is decimetres off): each mesh is first moved by the SE(3) alignment of its camera
         // positions onto the ground truth (the ATE's alignment), so the F-score measures the
         // shape, not the GPS error.
-        let score = |mesh: &TriangleMesh, poses: &[Isometry3<f64>]| {
-            let mut aligned = mesh.clone();
-            if let Some(truth) = truth.as_ref() {
-                let source: Vec<_> = poses.iter().map(|p| p.translation.vector).collect();
-                let target: Vec<_> = truth.iter().map(|p| p.translation.vector).collect();
-                let s = umeyama(&source, &target, false).ok()?;
-                aligned.transform(&Isometry3::from_parts(
-                    s.translation.into(),
-                    UnitQuaternion::from_rotation_matrix(&s.rotation),
-                ));
-            }
-            evaluate_mesh(&aligned, &rock.mesh, &eval, None)
-                .map(|e| e.fscore)
-                .ok()
-        };
+        let score =
+            |mesh: &TriangleMesh, poses: &[Isometry3<f64>], truth: Option<&Vec<Isometry3<f64>>>| {
+                let mut aligned = mesh.clone();
+                if let Some(truth) = truth {
+                    let source: Vec<_> = poses.iter().map(|p| p.translation.vector).collect();
+                    let target: Vec<_> = truth.iter().map(|p| p.translation.vector).collect();
+                    let s = umeyama(&source, &target, false).ok()?;
+                    aligned.transform(&Isometry3::from_parts(
+                        s.translation.into(),
+                        UnitQuaternion::from_rotation_matrix(&s.rotation),
+                    ));
+                }
+                evaluate_mesh(&aligned, &rock.mesh, &eval, None)
+                    .map(|e| e.fscore)
+                    .ok()
+            };
         if let Some(before) = &refined.mesh_before {
             extra.insert(
-                "fscore_before_ba".into(),
-                score(before, &keyframes.set.world_from_camera_odometry).into(),
+                "fscore_keyframes_before_ba".into(),
+                score(
+                    before,
+                    &keyframes.set.world_from_camera_odometry,
+                    truth.as_ref(),
+                )
+                .into(),
             );
         }
         extra.insert(
+            "fscore_keyframes_after_ba".into(),
+            score(&refined.mesh, &refined.world_from_camera, truth.as_ref()).into(),
+        );
+        let all_truth: Option<Vec<Isometry3<f64>>> = all_truth
+            .as_ref()
+            .map(|gt| gt.iter().map(|p| p.world_from_camera).collect());
+        let odometry: Vec<Isometry3<f64>> = keyframes
+            .odometry
+            .iter()
+            .map(|p| p.world_from_camera)
+            .collect();
+        extra.insert(
+            "fscore_before_ba".into(),
+            score(&mesh_all_before, &odometry, all_truth.as_ref()).into(),
+        );
+        extra.insert(
             "fscore_after_ba".into(),
-            score(&refined.mesh, &refined.world_from_camera).into(),
+            score(&mesh_all_after, &corrected, all_truth.as_ref()).into(),
         );
         extra.insert("fscore_tau_m".into(), args.tau.into());
         extra.insert("fscore_rock_id".into(), rock.id.into());
     }
-    Ok((refined.mesh, refined.mesh_ms))
+    Ok((mesh_all_after, mesh_ms))
+}
+
+/// Every frame's odometry pose moved by the bundle adjustment's correction of the last keyframe
+/// at or before it: `refined_kf · odometry_kf⁻¹ · odometry_frame`.
+fn correct_all_frames(
+    keyframes: &StoredKeyframes,
+    refined: &[Isometry3<f64>],
+) -> Vec<Isometry3<f64>> {
+    let mut k = 0;
+    keyframes
+        .odometry
+        .iter()
+        .enumerate()
+        .map(|(i, frame)| {
+            while k + 1 < keyframes.frame_indices.len() && keyframes.frame_indices[k + 1] <= i {
+                k += 1;
+            }
+            match (
+                refined.get(k),
+                keyframes.set.world_from_camera_odometry.get(k),
+            ) {
+                (Some(after), Some(before)) => after * before.inverse() * frame.world_from_camera,
+                _ => frame.world_from_camera,
+            }
+        })
+        .collect()
+}
+
+/// Fuses every frame of the sequence at its corrected pose into a fresh volume with the
+/// refinement's settings and meshes it; returns the mesh and the meshing time (ms).
+fn fuse_all_frames(
+    args: &MapArgs,
+    seq: &Sequence,
+    config: &RefineConfig,
+    corrected: &[Isometry3<f64>],
+) -> anyhow::Result<(TriangleMesh, f64)> {
+    let mut volume = TsdfVolume::new(config.tsdf.clone())?;
+    let bar = super::progress_bar(seq.len() as u64, "re-fusing");
+    for (i, pose) in corrected.iter().enumerate() {
+        let frame = seq
+            .load_frame(i)
+            .with_context(|| format!("{}: loading frame {i}", args.sequence.display()))?;
+        volume
+            .integrate(&frame, &seq.camera, pose)
+            .with_context(|| format!("integrating frame {i}"))?;
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    let started = Instant::now();
+    let mesh = extract_mesh(&volume, &config.meshing);
+    Ok((mesh, started.elapsed().as_secs_f64() * 1e3))
 }
 
 /// Fuses every frame at its `groundtruth.txt` or `estimate.txt` pose; returns the volume and
@@ -372,6 +505,8 @@ fn fuse_with_odometry(
         set: KeyframeSet::default(),
         timestamps_s: Vec::new(),
         truth: Vec::new(),
+        frame_indices: Vec::new(),
+        odometry: Vec::new(),
     });
     let bar = super::progress_bar(seq.len() as u64, "tracking");
     let mut integrate_ms = Vec::with_capacity(seq.len());
@@ -418,6 +553,7 @@ fn fuse_with_odometry(
                 stored.set.frames.push(frame);
                 stored.timestamps_s.push(entry.timestamp_s);
                 stored.truth.push(entry.world_from_camera_truth);
+                stored.frame_indices.push(i);
             }
         }
         poses.push(StampedPose {
@@ -460,6 +596,9 @@ fn fuse_with_odometry(
         if let Some(estimate) = stamped(seq, |e| e.world_from_camera_estimate) {
             extra.insert("estimate_ate_rmse_m".into(), ate(&estimate).into());
         }
+    }
+    if let Some(stored) = stored.as_mut() {
+        stored.odometry = poses;
     }
     Ok((tracker.into_volume(), integrate_ms, extra, stored))
 }

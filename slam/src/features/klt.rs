@@ -230,6 +230,85 @@ pub fn track_points_warped(
         .try_inverse()
         .filter(|m| m.iter().all(|v| v.is_finite()) && linear.iter().all(|v| v.is_finite()))
         .ok_or(FeatureError::Degenerate("window warp is not invertible"))?;
+    check_same_size(prev, next)?;
+    let levels = prev.levels().min(config.pyramid_levels);
+    Ok(points
+        .par_iter()
+        .map(|&p| {
+            track_with_check(
+                prev,
+                next,
+                p,
+                Vector2::zeros(),
+                &linear,
+                &inverse,
+                levels,
+                config,
+            )
+        })
+        .collect())
+}
+
+/// A point to track with a predicted position and a predicted local warp (see
+/// [`track_points_guided`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GuidedPoint {
+    /// The point in the previous (template) image, px.
+    pub position: Point2<f32>,
+    /// Where it is expected in the next image, px (the search starts there).
+    pub predicted: Point2<f32>,
+    /// The linear part of the local next-from-previous image mapping at the point (for example
+    /// the Jacobian of a plane-induced homography): window offset `o` in the previous image is
+    /// compared with offset `A·o` around the match.
+    pub next_from_prev_linear: Matrix2<f32>,
+}
+
+/// Tracks points whose position and local warp in `next` are predicted (from depth and a pose,
+/// say): each point's search starts at its `predicted` position, coarse to fine over
+/// `config.pyramid_levels` levels (one or two suffice when the prediction is within a few
+/// pixels), with its own window warp; the forward–backward check tracks back with the inverse
+/// warp from the prediction's offset. Tracking far apart views this way (rather than chaining
+/// small steps) keeps each observation's error independent of the others.
+///
+/// A point whose warp is not finite or not invertible gets [`KltStatus::Untextured`].
+///
+/// # Errors
+/// [`FeatureError::InvalidConfig`] for a bad config; [`FeatureError::SizeMismatch`] when the
+/// two pyramids differ in size or level count.
+pub fn track_points_guided(
+    prev: &KltPyramid,
+    next: &KltPyramid,
+    points: &[GuidedPoint],
+    config: &KltConfig,
+) -> Result<Vec<KltTrack>, FeatureError> {
+    config.validate()?;
+    check_same_size(prev, next)?;
+    let levels = prev.levels().min(config.pyramid_levels);
+    Ok(points
+        .par_iter()
+        .map(|g| {
+            let linear = g.next_from_prev_linear;
+            let inverse = linear.try_inverse().filter(|m| {
+                m.iter().all(|v| v.is_finite()) && linear.iter().all(|v| v.is_finite())
+            });
+            let guess = g.predicted - g.position;
+            match inverse {
+                Some(inverse) if guess.x.is_finite() && guess.y.is_finite() => track_with_check(
+                    prev, next, g.position, guess, &linear, &inverse, levels, config,
+                ),
+                _ => KltTrack {
+                    position: g.position,
+                    status: KltStatus::Untextured,
+                    residual: f32::INFINITY,
+                    forward_backward_px: f32::NAN,
+                },
+            }
+        })
+        .collect())
+}
+
+/// Errors unless the two pyramids have the same size and level count.
+fn check_same_size(prev: &KltPyramid, next: &KltPyramid) -> Result<(), FeatureError> {
     let (pw, ph) = prev.size();
     let (nw, nh) = next.size();
     if (pw, ph) != (nw, nh) {
@@ -246,34 +325,52 @@ pub fn track_points_warped(
             right: next.levels(),
         });
     }
-    let levels = prev.levels().min(config.pyramid_levels);
-    Ok(points
-        .par_iter()
-        .map(|&p| {
-            let forward = track_one(prev, next, p, &linear, levels, config);
-            if forward.status != KltStatus::Tracked {
-                return forward;
-            }
-            let Some(max_fb) = config.max_forward_backward_px else {
-                return forward;
-            };
-            let back = track_one(next, prev, forward.position, &inverse, levels, config);
-            let fb = if back.status == KltStatus::Tracked {
-                (back.position - p).norm()
-            } else {
-                f32::INFINITY
-            };
-            KltTrack {
-                forward_backward_px: fb,
-                status: if fb <= max_fb {
-                    KltStatus::Tracked
-                } else {
-                    KltStatus::ForwardBackward
-                },
-                ..forward
-            }
-        })
-        .collect())
+    Ok(())
+}
+
+/// Tracks `p` forward from the displacement guess `guess` (level-0 px), then back, and applies
+/// the forward–backward check.
+#[allow(clippy::too_many_arguments)]
+fn track_with_check(
+    prev: &KltPyramid,
+    next: &KltPyramid,
+    p: Point2<f32>,
+    guess: Vector2<f32>,
+    linear: &Matrix2<f32>,
+    inverse: &Matrix2<f32>,
+    levels: usize,
+    config: &KltConfig,
+) -> KltTrack {
+    let forward = track_one(prev, next, p, guess, linear, levels, config);
+    if forward.status != KltStatus::Tracked {
+        return forward;
+    }
+    let Some(max_fb) = config.max_forward_backward_px else {
+        return forward;
+    };
+    let back = track_one(
+        next,
+        prev,
+        forward.position,
+        p - forward.position,
+        inverse,
+        levels,
+        config,
+    );
+    let fb = if back.status == KltStatus::Tracked {
+        (back.position - p).norm()
+    } else {
+        f32::INFINITY
+    };
+    KltTrack {
+        forward_backward_px: fb,
+        status: if fb <= max_fb {
+            KltStatus::Tracked
+        } else {
+            KltStatus::ForwardBackward
+        },
+        ..forward
+    }
 }
 
 /// Level-`l` coordinates of a level-0 point.
@@ -290,11 +387,12 @@ fn inside(image: &GrayImage, p: Point2<f32>) -> bool {
         && p.y < (image.height() as f32 - 1.0)
 }
 
-/// Tracks one point coarse to fine.
+/// Tracks one point coarse to fine, starting from the displacement `guess` (level-0 px).
 fn track_one(
     prev: &KltPyramid,
     next: &KltPyramid,
     p0: Point2<f32>,
+    guess: Vector2<f32>,
     linear: &Matrix2<f32>,
     levels: usize,
     config: &KltConfig,
@@ -309,7 +407,7 @@ fn track_one(
         return failed(KltStatus::OutOfImage);
     }
     let half = (config.window_px / 2) as i32;
-    let mut d = Vector2::zeros();
+    let mut d = guess * 0.5f32.powi(levels.saturating_sub(1) as i32);
     for level in (0..levels).rev() {
         let (t_img, j_img) = (&prev.levels[level], &next.levels[level]);
         let p = to_level(p0, level);
@@ -561,6 +659,56 @@ mod tests {
             assert!((t.position.y - p.y - dy).abs() < 0.02, "{t:?}");
             assert!(t.forward_backward_px < 0.05);
         }
+    }
+
+    #[test]
+    fn guided_tracking_recovers_a_far_warped_match_from_its_prediction() {
+        // next(q) = prev(A⁻¹(q − c − t) + c): a 10° rotation, 15% zoom and a 47 px shift,
+        // searched from a prediction 2 px off with two pyramid levels.
+        let (angle, scale) = (10f32.to_radians(), 1.15f32);
+        let a = Matrix2::new(angle.cos(), -angle.sin(), angle.sin(), angle.cos()) * scale;
+        let a_inv = a.try_inverse().unwrap();
+        let (c, t) = (Vector2::new(160.0f32, 120.0), Vector2::new(40.0f32, -25.0));
+        let prev = image(320, 240, texture);
+        let next = image(320, 240, |x, y| {
+            let q = a_inv * (Vector2::new(x, y) - c - t) + c;
+            texture(q.x, q.y)
+        });
+        let config = KltConfig {
+            window_px: 15,
+            pyramid_levels: 2,
+            ..KltConfig::default()
+        };
+        let (prev_pyramid, next_pyramid) = (KltPyramid::new(&prev, 2), KltPyramid::new(&next, 2));
+        let points: Vec<_> = [(130.0f32, 100.0f32), (150.0, 130.0), (175.0, 110.0)]
+            .iter()
+            .map(|&(x, y)| Point2::new(x, y))
+            .collect();
+        let truth: Vec<Point2<f32>> = points
+            .iter()
+            .map(|p| Point2::from(a * (p.coords - c) + c + t))
+            .collect();
+        let guided: Vec<GuidedPoint> = points
+            .iter()
+            .zip(&truth)
+            .map(|(p, q)| GuidedPoint {
+                position: *p,
+                predicted: Point2::new(q.x + 1.5, q.y - 1.5),
+                next_from_prev_linear: a,
+            })
+            .collect();
+        let tracks = track_points_guided(&prev_pyramid, &next_pyramid, &guided, &config).unwrap();
+        for (track, q) in tracks.iter().zip(&truth) {
+            assert_eq!(track.status, KltStatus::Tracked, "{track:?}");
+            assert!((track.position - q).norm() < 0.05, "{track:?} vs {q:?}");
+        }
+        // A singular warp is refused per point.
+        let singular = GuidedPoint {
+            next_from_prev_linear: Matrix2::zeros(),
+            ..guided[0]
+        };
+        let refused = track_points_guided(&prev_pyramid, &next_pyramid, &[singular], &config);
+        assert_eq!(refused.unwrap()[0].status, KltStatus::Untextured);
     }
 
     #[test]

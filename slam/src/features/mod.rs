@@ -47,7 +47,10 @@ pub mod pattern;
 mod similarity;
 
 pub use corners::{Corner, CornerConfig, CornerRegion, CornerScore, PixelRect, detect_corners};
-pub use klt::{KltConfig, KltPyramid, KltStatus, KltTrack, track_points, track_points_warped};
+pub use klt::{
+    GuidedPoint, KltConfig, KltPyramid, KltStatus, KltTrack, track_points, track_points_guided,
+    track_points_warped,
+};
 pub use motion::{MotionConfig, track_similarity};
 pub use similarity::{
     Similarity2, SimilarityFit, SimilarityFitConfig, fit_similarity_least_squares,

@@ -1,25 +1,36 @@
-//! Landmarks for bundle adjustment: corners tracked with pyramidal KLT from keyframe to
-//! keyframe, on and around the target's region of interest, initialised from depth.
+//! Landmarks for bundle adjustment: corners on and around the target's region of interest,
+//! initialised from depth, re-observed in every later keyframe where the odometry predicts them.
 //!
-//! At each keyframe the live tracks are followed from the previous keyframe with KLT (forward–
-//! backward checked), then checked against the odometry: a track whose pixel lies farther than
-//! `max_prediction_error_px` from its landmark's projection through the odometry pose is ended
-//! (a KLT slip onto another surface). New corners are detected inside the image rectangle that
-//! the ROI projects to, away from live tracks, where the depth is valid and the back-projected
-//! point lies inside the ROI (grown by `roi_margin_m`). Landmarks seen by fewer than
-//! `min_observations` keyframes are dropped.
+//! Each landmark keeps the keyframe it was started in (its anchor), its anchor pixel and the
+//! surface normal fitted to the anchor's depth around it. At each new keyframe every landmark
+//! is projected through the odometry pose; where it lands inside the image, in front of the
+//! measured surface (not occluded), seen within `max_view_angle_deg` of the anchor's view and
+//! from the front of its surface, it is tracked with KLT **from its anchor image**, starting at
+//! the predicted pixel with the window warped by the plane-induced homography (the linear part
+//! at the point). Observations are therefore independent (no drift along a chain of
+//! keyframe-to-keyframe tracks), sub-pixel, and a landmark re-enters the view when the orbit
+//! closes its loop. A match farther than `max_prediction_error_px` from the prediction is
+//! rejected (a slip onto another surface). After each new observation the landmark is
+//! re-triangulated from its pixels and depths with the odometry poses, which sharpens the next
+//! prediction.
+//!
+//! New corners are detected inside the image rectangle that the ROI projects to, away from the
+//! landmarks observed in the keyframe, where the depth is valid and smooth around the corner
+//! (no silhouettes) and the back-projected point lies inside the ROI (grown by
+//! `roi_margin_m`). Landmarks seen by fewer than `min_observations` keyframes are dropped.
 
-use nalgebra::{Isometry3, Point2, Point3, Vector2, Vector3};
+use nalgebra::{Isometry3, Matrix2, Matrix3, Point2, Point3, Vector2, Vector3};
 use serde::{Deserialize, Serialize};
 
 use super::MappingError;
+use super::residuals::triangulate_point;
 use crate::PinholeCamera;
-use crate::ba::KeyframeObservation;
+use crate::ba::{KeyframeNoise, KeyframeObservation};
 use crate::features::{
-    CornerConfig, CornerRegion, KltConfig, KltPyramid, KltStatus, PixelRect, detect_corners,
-    track_points,
+    CornerConfig, CornerRegion, GuidedPoint, KltConfig, KltPyramid, KltStatus, PixelRect,
+    detect_corners, track_points_guided,
 };
-use crate::image::{DepthImage, GrayImage};
+use crate::image::{DepthImage, GrayImage, MaskImage};
 use crate::tsdf::Roi;
 
 /// Settings of [`track_landmarks`].
@@ -29,31 +40,46 @@ pub struct LandmarkConfig {
     /// Corner detection at each keyframe. Default: Harris, at most 400 corners at least 8 px
     /// apart (a 640×480 frame of a rock at 4 m yields a few hundred usable corners).
     pub corners: CornerConfig,
-    /// KLT between keyframes. Default [`KltConfig::default`] (25 px window, 4 levels, 15
-    /// iterations, forward–backward 0.5 px).
+    /// KLT from a landmark's anchor keyframe into a later one, started at the predicted pixel
+    /// with the predicted window warp. Default: [`KltConfig::default`] with 2 pyramid levels
+    /// (the odometry predicts within a pixel or two) and a 15 px window (about 15 cm of rock at
+    /// 4 m: small enough for the plane model of the warp, large enough for sub-pixel matches).
     pub klt: KltConfig,
-    /// New corners are not started within this distance of a live track, pixels. Default 8.
+    /// New corners are not started within this distance of a landmark observed in the same
+    /// keyframe, pixels. Default 8.
     pub min_track_distance_px: f64,
     /// A landmark needs at least this many keyframes observing it. Default 3.
     pub min_observations: usize,
-    /// End a track whose KLT position is farther than this from the landmark projected through
-    /// the odometry pose, pixels. Default 4 (odometry drifts by millimetres, a pixel is about
-    /// 1 cm at 4 m).
+    /// Reject a KLT match farther than this from the landmark's projection through the odometry
+    /// pose, pixels. Default 3 (odometry drifts by millimetres, a pixel is about 1 cm at 4 m;
+    /// before a landmark is triangulated its depth-only position is off by a few centimetres).
     pub max_prediction_error_px: f64,
     /// Corners whose back-projected point lies outside the ROI grown by this are ignored,
     /// metres. Default 0.3 ("on and around the target").
     pub roi_margin_m: f64,
-    /// Follow the tracks alive at the last keyframe into the first one and merge them with the
-    /// tracks started there (an orbit that closes its loop). Default true.
-    pub close_loop: bool,
-    /// Loop merging joins tracks that land within this distance, pixels. Default 1.5.
-    pub loop_merge_px: f64,
-    /// New corners need valid depths within this many pixels around them, all within twice
-    /// `max_depth_spread_ratio` of the corner's own (no silhouettes). Default 4.
-    pub silhouette_radius_px: u32,
+    /// A landmark is searched for only in keyframes whose viewing direction to it lies within
+    /// this angle of its anchor's, degrees (beyond it the plane-warped anchor window no longer
+    /// matches the rock's curved surface). Default 45.
+    pub max_view_angle_deg: f64,
+    /// A landmark is searched for only where the measured depth at its predicted pixel agrees
+    /// with its predicted depth within this fraction (otherwise it is occluded or off the
+    /// surface). Default 0.05 (the default sensor's depth σ at 4.5 m is 1%).
+    pub max_occlusion_depth_ratio: f64,
+    /// Radius of the square window of depths a new corner's surface plane is fitted to,
+    /// pixels. Default 8 (17×17 px, about 17 cm at 4.5 m).
+    pub normal_radius_px: u32,
+    /// A new corner is on a silhouette or depth edge (and not started) when more than a tenth
+    /// of that window has no depth or a depth lies farther than this fraction of the corner's
+    /// depth from the plane. Default 0.05 (five σ of the default sensor at 4.5 m; a rock
+    /// against the terrain behind it jumps by tens of percent).
+    pub silhouette_depth_ratio: f64,
     /// A depth is used (for initialisation and as a depth residual) only where the four pixels
-    /// around the corner agree within this fraction of their mean. Default 0.02.
+    /// around the corner agree within this fraction of their mean. Default 0.05 (a range of four
+    /// samples of the default sensor's 1% noise at 4.5 m; 0.02 threw half the depths away).
     pub max_depth_spread_ratio: f64,
+    /// Pixel and depth σ used when re-triangulating a landmark between keyframes. Default
+    /// 0.5 px, 0.045 m (the default sensor's depth σ at 4.5 m).
+    pub triangulation_noise: KeyframeNoise,
 }
 
 impl Default for LandmarkConfig {
@@ -64,15 +90,24 @@ impl Default for LandmarkConfig {
                 min_distance_px: 8.0,
                 ..CornerConfig::default()
             },
-            klt: KltConfig::default(),
+            klt: KltConfig {
+                window_px: 15,
+                pyramid_levels: 2,
+                ..KltConfig::default()
+            },
             min_track_distance_px: 8.0,
             min_observations: 3,
-            max_prediction_error_px: 4.0,
+            max_prediction_error_px: 3.0,
             roi_margin_m: 0.3,
-            close_loop: true,
-            silhouette_radius_px: 4,
-            loop_merge_px: 1.5,
-            max_depth_spread_ratio: 0.02,
+            max_view_angle_deg: 45.0,
+            max_occlusion_depth_ratio: 0.05,
+            normal_radius_px: 8,
+            silhouette_depth_ratio: 0.05,
+            max_depth_spread_ratio: 0.05,
+            triangulation_noise: KeyframeNoise {
+                pixel_sigma_px: 0.5,
+                depth_sigma_m: 0.045,
+            },
         }
     }
 }
@@ -92,18 +127,21 @@ pub struct LandmarkView<'a> {
 /// [`crate::ba::KeyframeModel`].
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Landmarks {
-    /// World positions (ENU metres), initialised from the first observation's depth and the
-    /// odometry pose.
+    /// World positions (ENU metres), triangulated from the observations' pixels and depths with
+    /// the odometry poses.
     pub points: Vec<Vector3<f64>>,
     /// Observations, grouped by landmark in creation order.
     pub observations: Vec<KeyframeObservation>,
 }
 
-/// A live track: its landmark's first back-projection and its observations so far.
+/// A landmark being tracked: where it started, its surface and its observations so far (their
+/// `point` index is assigned when the landmarks are assembled).
 struct Track {
+    anchor: usize,
+    anchor_pixel: Point2<f32>,
+    normal_world: Vector3<f64>,
     point_world: Vector3<f64>,
-    position: Point2<f32>,
-    observations: Vec<(usize, Vector2<f64>, Option<f64>)>,
+    observations: Vec<KeyframeObservation>,
 }
 
 /// Tracks corners through `views` (keyframes in order) and turns tracks into landmarks.
@@ -118,132 +156,197 @@ pub fn track_landmarks(
     config: &LandmarkConfig,
 ) -> Result<Landmarks, MappingError> {
     validate(config)?;
-    let mut finished: Vec<Track> = Vec::new();
-    let mut live: Vec<Track> = Vec::new();
-    let mut previous: Option<KltPyramid> = None;
+    let poses: Vec<Isometry3<f64>> = views.iter().map(|v| *v.world_from_camera).collect();
+    let mut pyramids: Vec<KltPyramid> = Vec::with_capacity(views.len());
+    let mut tracks: Vec<Track> = Vec::new();
     for (k, view) in views.iter().enumerate() {
         let pyramid = KltPyramid::new(view.gray, config.klt.pyramid_levels);
-        let camera_from_world = view.world_from_camera.inverse();
-        if let Some(prev) = &previous {
-            let points: Vec<Point2<f32>> = live.iter().map(|t| t.position).collect();
-            let tracked = track_points(prev, &pyramid, &points, &config.klt)?;
-            let mut kept = Vec::with_capacity(live.len());
-            for (mut track, result) in live.drain(..).zip(tracked) {
-                let predicted =
-                    camera.project(&(camera_from_world * Point3::from(track.point_world)));
+        // Tracks are created keyframe by keyframe, so their anchors never decrease and one
+        // KLT call serves each anchor.
+        let candidates: Vec<(usize, usize, GuidedPoint)> = tracks
+            .iter()
+            .enumerate()
+            .filter_map(|(i, track)| {
+                Some((i, track.anchor, predict(camera, views, track, k, config)?))
+            })
+            .collect();
+        let mut observed: Vec<Point2<f32>> = Vec::new();
+        for group in candidates.chunk_by(|a, b| a.1 == b.1) {
+            let anchor = group[0].1;
+            let points: Vec<GuidedPoint> = group.iter().map(|c| c.2).collect();
+            let results = track_points_guided(&pyramids[anchor], &pyramid, &points, &config.klt)?;
+            for (&(i, _, guided), result) in group.iter().zip(results) {
+                let miss = (result.position - guided.predicted).norm();
+                if result.status != KltStatus::Tracked
+                    || !(f64::from(miss) <= config.max_prediction_error_px)
+                {
+                    continue;
+                }
                 let pixel =
                     Vector2::new(f64::from(result.position.x), f64::from(result.position.y));
-                let agrees = predicted
-                    .is_some_and(|p| (p.coords - pixel).norm() <= config.max_prediction_error_px);
-                if result.status == KltStatus::Tracked && agrees {
-                    track.position = result.position;
-                    let depth = depth_at(view.depth_m, &pixel, config.max_depth_spread_ratio);
-                    track.observations.push((k, pixel, depth));
-                    kept.push(track);
-                } else {
-                    finished.push(track);
-                }
+                let track = &mut tracks[i];
+                track.observations.push(KeyframeObservation {
+                    camera: k,
+                    point: 0,
+                    pixel,
+                    depth_m: depth_at(view.depth_m, &pixel, config.max_depth_spread_ratio),
+                });
+                retriangulate(camera, &poses, track, &config.triangulation_noise);
+                observed.push(result.position);
             }
-            live = kept;
         }
-        let started = start_tracks(camera, view, k, roi, &live, config)?;
-        live.extend(started);
-        previous = Some(pyramid);
+        tracks.extend(start_tracks(camera, view, k, roi, &observed, config)?);
+        pyramids.push(pyramid);
     }
-    if config.close_loop
-        && views.len() > 2
-        && let Some(last) = &previous
-    {
-        close_loop(camera, views, last, &mut live, &mut finished, config)?;
-    }
-    finished.append(&mut live);
     let mut landmarks = Landmarks::default();
-    for track in finished {
+    for track in tracks {
         if track.observations.len() < config.min_observations {
             continue;
         }
         let point = landmarks.points.len();
         landmarks.points.push(track.point_world);
-        for (camera_index, pixel, depth_m) in track.observations {
-            landmarks.observations.push(KeyframeObservation {
-                camera: camera_index,
-                point,
-                pixel,
-                depth_m,
-            });
-        }
+        landmarks.observations.extend(
+            track
+                .observations
+                .into_iter()
+                .map(|o| KeyframeObservation { point, ..o }),
+        );
     }
     Ok(landmarks)
 }
 
-/// Follows the live tracks from the last keyframe into the first; a track that lands within
-/// `loop_merge_px` of a track started in the first keyframe takes over that track's
-/// observations (one landmark seen at both ends of the loop).
-fn close_loop(
+/// Where `track` should appear in keyframe `k` and how its anchor window deforms there, or
+/// `None` when it should not be searched for (behind the camera, outside the image, occluded,
+/// seen from too far off its anchor's view or from behind its surface).
+fn predict(
     camera: &PinholeCamera,
     views: &[LandmarkView<'_>],
-    last: &KltPyramid,
-    live: &mut [Track],
-    finished: &mut [Track],
+    track: &Track,
+    k: usize,
     config: &LandmarkConfig,
-) -> Result<(), MappingError> {
-    let first = KltPyramid::new(views[0].gray, config.klt.pyramid_levels);
-    let points: Vec<Point2<f32>> = live.iter().map(|t| t.position).collect();
-    let tracked = track_points(last, &first, &points, &config.klt)?;
-    let camera_from_world = views[0].world_from_camera.inverse();
-    let merge_d2 = (config.loop_merge_px * config.loop_merge_px) as f32;
-    for (track, result) in live.iter_mut().zip(tracked) {
-        if result.status != KltStatus::Tracked || track.observations.iter().any(|o| o.0 == 0) {
-            continue;
-        }
-        let pixel = Vector2::new(f64::from(result.position.x), f64::from(result.position.y));
-        let predicted = camera.project(&(camera_from_world * Point3::from(track.point_world)));
-        if !predicted.is_some_and(|p| (p.coords - pixel).norm() <= config.max_prediction_error_px) {
-            continue;
-        }
-        // The nearest unmerged track started in keyframe 0.
-        let nearest = finished
-            .iter_mut()
-            .filter(|t| t.observations.first().is_some_and(|o| o.0 == 0))
-            .map(|t| {
-                let p = t.observations[0].1;
-                let d2 = (p.x as f32 - result.position.x).powi(2)
-                    + (p.y as f32 - result.position.y).powi(2);
-                (d2, t)
-            })
-            .filter(|(d2, _)| *d2 <= merge_d2)
-            .min_by(|a, b| a.0.total_cmp(&b.0));
-        if let Some((_, start)) = nearest {
-            track.observations.append(&mut start.observations);
-        }
+) -> Option<GuidedPoint> {
+    let pose = views[k].world_from_camera;
+    let anchor_pose = views[track.anchor].world_from_camera;
+    let point = Point3::from(track.point_world);
+    let in_camera = pose.inverse_transform_point(&point);
+    let predicted = camera.project(&in_camera)?;
+    let margin = f64::from(config.klt.window_px / 2 + 2);
+    if !camera.in_bounds(&predicted, margin) {
+        return None;
     }
-    Ok(())
+    let measured = depth_at(
+        views[k].depth_m,
+        &predicted.coords,
+        config.max_depth_spread_ratio,
+    )?;
+    if (measured - in_camera.z).abs() > config.max_occlusion_depth_ratio * in_camera.z {
+        return None;
+    }
+    let to_current = pose.translation.vector - track.point_world;
+    let to_anchor = anchor_pose.translation.vector - track.point_world;
+    let cos_view = to_current.dot(&to_anchor) / (to_current.norm() * to_anchor.norm());
+    if !(cos_view >= config.max_view_angle_deg.to_radians().cos())
+        || track.normal_world.dot(&to_current) <= 0.0
+    {
+        return None;
+    }
+    let linear = plane_warp(
+        camera,
+        anchor_pose,
+        pose,
+        &track.anchor_pixel,
+        &track.point_world,
+        &track.normal_world,
+    )?;
+    Some(GuidedPoint {
+        position: track.anchor_pixel,
+        predicted: Point2::new(predicted.x as f32, predicted.y as f32),
+        next_from_prev_linear: linear,
+    })
+}
+
+/// The Jacobian at `anchor_pixel` of the map from the anchor image to the current image induced
+/// by the plane through `point_world` with normal `normal_world` (central differences of one
+/// pixel); `None` when a ray misses the plane or a point falls behind a camera.
+fn plane_warp(
+    camera: &PinholeCamera,
+    world_from_anchor: &Isometry3<f64>,
+    world_from_current: &Isometry3<f64>,
+    anchor_pixel: &Point2<f32>,
+    point_world: &Vector3<f64>,
+    normal_world: &Vector3<f64>,
+) -> Option<Matrix2<f32>> {
+    let centre = world_from_anchor.translation.vector;
+    let through = |du: f64, dv: f64| -> Option<Vector2<f64>> {
+        let pixel = Point2::new(
+            f64::from(anchor_pixel.x) + du,
+            f64::from(anchor_pixel.y) + dv,
+        );
+        let ray = world_from_anchor.rotation * camera.unproject(&pixel, 1.0).coords;
+        let along = normal_world.dot(&ray);
+        if along.abs() < 1e-6 {
+            return None;
+        }
+        let s = normal_world.dot(&(point_world - centre)) / along;
+        if !(s > 0.0) {
+            return None;
+        }
+        let on_plane = Point3::from(centre + ray * s);
+        Some(
+            camera
+                .project(&world_from_current.inverse_transform_point(&on_plane))?
+                .coords,
+        )
+    };
+    let du = (through(1.0, 0.0)? - through(-1.0, 0.0)?) * 0.5;
+    let dv = (through(0.0, 1.0)? - through(0.0, -1.0)?) * 0.5;
+    let linear = Matrix2::new(du.x as f32, dv.x as f32, du.y as f32, dv.y as f32);
+    linear.iter().all(|v| v.is_finite()).then_some(linear)
+}
+
+/// Re-triangulates a track from its pixels and depths with the odometry poses; keeps the old
+/// position when that fails.
+fn retriangulate(
+    camera: &PinholeCamera,
+    world_from_camera: &[Isometry3<f64>],
+    track: &mut Track,
+    noise: &KeyframeNoise,
+) {
+    if let Some(point) = triangulate_point(
+        camera,
+        world_from_camera,
+        &track.observations,
+        Some(noise),
+        &track.point_world,
+        5,
+    ) {
+        track.point_world = point;
+    }
 }
 
 /// Detects corners in keyframe `k` and starts a track for each usable one (the corner detector's
-/// minimum distance keeps new corners apart; `existing` keeps them off live tracks).
+/// minimum distance keeps new corners apart; `observed` keeps them off landmarks seen here).
 fn start_tracks(
     camera: &PinholeCamera,
     view: &LandmarkView<'_>,
     k: usize,
     roi: Option<&Roi>,
-    existing: &[Track],
+    observed: &[Point2<f32>],
     config: &LandmarkConfig,
 ) -> Result<Vec<Track>, MappingError> {
     let mut out = Vec::new();
-    let region = match roi {
-        Some(roi) => match roi_rect(camera, view.world_from_camera, roi, config.roi_margin_m) {
-            Some(rect) => CornerRegion::Rect(rect),
-            None => return Ok(out),
-        },
-        None => CornerRegion::Whole,
-    };
+    if let Some(roi) = roi
+        && roi_rect(camera, view.world_from_camera, roi, config.roi_margin_m).is_none()
+    {
+        return Ok(out);
+    }
+    let mask = usable_mask(camera, view, roi, config.roi_margin_m);
+    let region = CornerRegion::Mask { mask: &mask, id: 1 };
     let corners = detect_corners(view.gray, &config.corners, &region)?;
-    let taken: Vec<Point2<f32>> = existing.iter().map(|t| t.position).collect();
     let min_d2 = (config.min_track_distance_px * config.min_track_distance_px) as f32;
     for corner in corners {
         let p = corner.position;
-        if taken
+        if observed
             .iter()
             .any(|q| (q.x - p.x).powi(2) + (q.y - p.y).powi(2) < min_d2)
         {
@@ -253,29 +356,118 @@ fn start_tracks(
         let Some(depth) = depth_at(view.depth_m, &pixel, config.max_depth_spread_ratio) else {
             continue;
         };
-        // Corners on silhouettes (T-junctions of two surfaces) move with the view: keep only
-        // corners on a surface that is continuous around them.
-        if !depth_is_smooth(
-            view.depth_m,
-            &pixel,
-            config.silhouette_radius_px,
-            config.max_depth_spread_ratio * 2.0,
-        ) {
-            continue;
-        }
-        let world = view.world_from_camera * camera.unproject(&Point2::from(pixel), depth);
+        let in_camera = camera.unproject(&Point2::from(pixel), depth);
+        let world = view.world_from_camera * in_camera;
         if let Some(roi) = roi
             && !inside_grown(roi, &world, config.roi_margin_m)
         {
             continue;
         }
+        // Corners on silhouettes (T-junctions of two surfaces) move with the view: keep only
+        // corners on a surface that is continuous around them; its normal predicts the warp.
+        let Some(normal_camera) = surface_normal(camera, view.depth_m, &pixel, depth, config)
+        else {
+            continue;
+        };
         out.push(Track {
+            anchor: k,
+            anchor_pixel: p,
+            normal_world: view.world_from_camera.rotation * normal_camera,
             point_world: world.coords,
-            position: p,
-            observations: vec![(k, pixel, Some(depth))],
+            observations: vec![KeyframeObservation {
+                camera: k,
+                point: 0,
+                pixel,
+                depth_m: Some(depth),
+            }],
         });
     }
     Ok(out)
+}
+
+/// A mask of the pixels where new corners may start: 1 where the depth is valid and (with a
+/// ROI) the back-projected point lies inside the ROI grown by `margin_m`, 0 elsewhere.
+fn usable_mask(
+    camera: &PinholeCamera,
+    view: &LandmarkView<'_>,
+    roi: Option<&Roi>,
+    margin_m: f64,
+) -> MaskImage {
+    let (w, h) = (view.depth_m.width(), view.depth_m.height());
+    let mut mask = MaskImage::filled(w, h, 0);
+    for v in 0..h {
+        for u in 0..w {
+            let Some(&d) = view.depth_m.get(u, v) else {
+                continue;
+            };
+            if !(d > 0.0 && d.is_finite()) {
+                continue;
+            }
+            let inside = roi.is_none_or(|roi| {
+                let p = camera.unproject(&Point2::new(f64::from(u), f64::from(v)), f64::from(d));
+                inside_grown(roi, &(view.world_from_camera * p), margin_m)
+            });
+            if inside && let Some(m) = mask.get_mut(u, v) {
+                *m = 1;
+            }
+        }
+    }
+    mask
+}
+
+/// The unit normal (camera coordinates, facing the camera) of the plane fitted to the depths
+/// within `normal_radius_px` of `pixel` (whose depth is `centre_depth_m`), or `None` on a
+/// silhouette or depth edge: more than a tenth of the window without depth, or a depth farther
+/// than `silhouette_depth_ratio` of the centre depth from the plane.
+fn surface_normal(
+    camera: &PinholeCamera,
+    depth_m: &DepthImage,
+    pixel: &Vector2<f64>,
+    centre_depth_m: f64,
+    config: &LandmarkConfig,
+) -> Option<Vector3<f64>> {
+    let r = i64::from(config.normal_radius_px);
+    let (u0, v0) = (pixel.x.round() as i64, pixel.y.round() as i64);
+    let window = ((2 * r + 1) * (2 * r + 1)) as usize;
+    let mut points = Vec::with_capacity(window);
+    for v in v0 - r..=v0 + r {
+        for u in u0 - r..=u0 + r {
+            let d = u32::try_from(u)
+                .ok()
+                .zip(u32::try_from(v).ok())
+                .and_then(|(u, v)| depth_m.get(u, v))
+                .map_or(0.0, |&d| f64::from(d));
+            if d > 0.0 && d.is_finite() {
+                points.push(camera.unproject(&Point2::new(u as f64, v as f64), d).coords);
+            }
+        }
+    }
+    if points.len() * 10 < window * 9 || points.len() < 3 {
+        return None;
+    }
+    let mean = points.iter().sum::<Vector3<f64>>() / points.len() as f64;
+    let covariance = points
+        .iter()
+        .map(|p| (p - mean) * (p - mean).transpose())
+        .sum::<Matrix3<f64>>();
+    let eigen = covariance.symmetric_eigen();
+    let normal = eigen
+        .eigenvectors
+        .column(eigen.eigenvalues.imin())
+        .into_owned();
+    let limit = config.silhouette_depth_ratio * centre_depth_m;
+    if !points
+        .iter()
+        .all(|p| (p - mean).dot(&normal).abs() <= limit)
+    {
+        return None;
+    }
+    let normal = if normal.dot(&mean) > 0.0 {
+        -normal
+    } else {
+        normal
+    };
+    normal.iter().all(|v| v.is_finite()).then_some(normal)
 }
 
 fn validate(config: &LandmarkConfig) -> Result<(), MappingError> {
@@ -287,11 +479,32 @@ fn validate(config: &LandmarkConfig) -> Result<(), MappingError> {
         ("min_track_distance_px", config.min_track_distance_px),
         ("max_prediction_error_px", config.max_prediction_error_px),
         ("roi_margin_m", config.roi_margin_m),
-        ("loop_merge_px", config.loop_merge_px),
+        (
+            "max_occlusion_depth_ratio",
+            config.max_occlusion_depth_ratio,
+        ),
+        ("silhouette_depth_ratio", config.silhouette_depth_ratio),
         ("max_depth_spread_ratio", config.max_depth_spread_ratio),
     ] {
         if !(value.is_finite() && value >= 0.0) {
             return bad(field, "must be finite and non-negative");
+        }
+    }
+    if !(config.max_view_angle_deg > 0.0 && config.max_view_angle_deg <= 90.0) {
+        return bad("max_view_angle_deg", "must be in (0, 90]");
+    }
+    for (field, value) in [
+        (
+            "triangulation_noise.pixel_sigma_px",
+            config.triangulation_noise.pixel_sigma_px,
+        ),
+        (
+            "triangulation_noise.depth_sigma_m",
+            config.triangulation_noise.depth_sigma_m,
+        ),
+    ] {
+        if !(value.is_finite() && value > 0.0) {
+            return bad(field, "must be positive and finite");
         }
     }
     Ok(())
@@ -325,42 +538,6 @@ pub fn depth_at(depth_m: &DepthImage, pixel: &Vector2<f64>, max_spread_ratio: f6
     let top = values[0] * (1.0 - fu) + values[1] * fu;
     let bottom = values[2] * (1.0 - fu) + values[3] * fu;
     Some(top * (1.0 - fv) + bottom * fv)
-}
-
-/// Whether every depth within `radius_px` (a square window) of `pixel` is valid and within
-/// `max_spread_ratio` of the centre pixel's depth.
-fn depth_is_smooth(
-    depth_m: &DepthImage,
-    pixel: &Vector2<f64>,
-    radius_px: u32,
-    max_spread_ratio: f64,
-) -> bool {
-    let (u, v) = (pixel.x.round() as i64, pixel.y.round() as i64);
-    let r = i64::from(radius_px);
-    let Some(&centre) = u32::try_from(u)
-        .ok()
-        .zip(u32::try_from(v).ok())
-        .and_then(|(u, v)| depth_m.get(u, v))
-    else {
-        return false;
-    };
-    let centre = f64::from(centre);
-    for dv in -r..=r {
-        for du in -r..=r {
-            let (x, y) = (u + du, v + dv);
-            let Some(&d) = u32::try_from(x)
-                .ok()
-                .zip(u32::try_from(y).ok())
-                .and_then(|(x, y)| depth_m.get(x, y))
-            else {
-                return false;
-            };
-            if !(d > 0.0 && (f64::from(d) - centre).abs() <= max_spread_ratio * centre) {
-                return false;
-            }
-        }
-    }
-    true
 }
 
 /// Whether `p` lies inside `roi` grown by `margin_m` on every side.

@@ -4,6 +4,7 @@
 //!   ([`ModelTracker`]).
 //! - [`landmarks`]: corners tracked with KLT across keyframes on and around the target,
 //!   initialised from depth ([`track_landmarks`]).
+//! - [`residuals`]: how well landmark observations fit a set of poses ([`reprojection_stats`]).
 //! - [`refine`]: landmarks → bundle adjustment → re-integration → mesh on a target's stored
 //!   keyframes ([`refine_keyframes`]), shared by `scarp map --ba` and the mission.
 //!
@@ -11,6 +12,7 @@
 
 pub mod landmarks;
 pub mod refine;
+pub mod residuals;
 pub mod tracker;
 
 use thiserror::Error;
@@ -23,6 +25,7 @@ use crate::tsdf::TsdfError;
 
 pub use landmarks::{LandmarkConfig, LandmarkView, Landmarks, track_landmarks};
 pub use refine::{KeyframeSet, RefineConfig, RefinedMap, fuse_and_mesh, refine_keyframes};
+pub use residuals::{ReprojectionStats, reprojection_stats, triangulate_point};
 pub use tracker::{ModelTracker, ModelTrackingConfig, TrackedFrame, TrackingReferenceKind};
 
 /// An error of the mapping pipeline.
