@@ -330,7 +330,11 @@ impl Trajectory {
             0.01
         };
         for seg in &self.segments {
-            let n = (seg.duration_s / period).ceil().max(1.0) as usize;
+            // A segment is one degree-7 polynomial: a few thousand samples see its peaks, and
+            // the cap keeps an absurdly long segment from stalling the caller.
+            let n = (seg.duration_s / period)
+                .ceil()
+                .clamp(1.0, MAX_PEAK_SAMPLES) as usize;
             for k in 0..=n {
                 let tau = k as f64 / n as f64;
                 let v = seg.derivative(tau, 1);
@@ -827,6 +831,12 @@ fn subdivide(wps: &[Waypoint], max_len: f64) -> (Path, Vec<usize>) {
     (Path::new(out), index)
 }
 
+/// Samples per segment at most when looking for a trajectory's peaks.
+const MAX_PEAK_SAMPLES: f64 = 4096.0;
+
+/// Longest trajectory the time scaling may produce (s): beyond it the scaling has diverged.
+const MAX_TRAJECTORY_S: f64 = 36_000.0;
+
 /// Plans a minimum-snap trajectory through `path`, starting from `start` and ending at rest,
 /// then scales time so that speed, acceleration and yaw rate stay within `cfg`'s limits
 /// (verified by dense sampling at `cfg.sample_period_s`).
@@ -865,6 +875,14 @@ pub fn plan_min_snap(
     let mut best_feasible: Option<Trajectory> = None;
     let mut last_peaks = TrajectoryPeaks::default();
     for _ in 0..cfg.max_scaling_iterations.max(1) {
+        let total_s: f64 = durations.iter().sum();
+        if !(total_s.is_finite() && total_s <= MAX_TRAJECTORY_S) {
+            return Err(PlanError::Solver {
+                reason: format!(
+                    "time scaling stretched the trajectory to {total_s:.3e} s (more than {MAX_TRAJECTORY_S} s): the waypoints cannot be flown within the limits"
+                ),
+            });
+        }
         let traj = solve_inner(&basis, wps, start, &durations)?.trajectory;
         let p = traj.peaks(cfg.sample_period_s);
         last_peaks = p;

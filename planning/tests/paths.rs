@@ -540,4 +540,14 @@ fn base_ring_on_a_scarp_follows_the_terrain() {
             .any(|r| matches!(r, Repair::FollowedTerrain { ring: 0, .. }))
     );
     assert!(plan.clearance.unwrap().is_clear());
+    let (traj, report, _) = plan_clear_trajectory(
+        &plan.path,
+        &StartState::default(),
+        &cfg.min_snap,
+        &env,
+        &cfg.clearance,
+    )
+    .unwrap();
+    assert!(report.is_clear());
+    assert!(traj.duration_s() < 600.0, "{} s", traj.duration_s());
 }
