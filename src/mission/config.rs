@@ -206,6 +206,11 @@ pub struct MappingConfig {
     pub odometry: scarp_slam::odometry::OdometryConfig,
     /// Keyframe selection for bundle adjustment.
     pub keyframes: scarp_slam::keyframes::KeyframeConfig,
+    /// While mapping, the controller flies on the map's odometry (anchored at the state
+    /// estimate when mapping began) instead of the GPS/IMU estimate, so the rings stay put
+    /// around the rock while the GPS walk wanders. Default false: an odometry failure then
+    /// steers the vehicle too (seen once on the default world, 0.9 m from the rock).
+    pub fly_on_odometry: bool,
 }
 
 impl Default for MappingConfig {
@@ -219,6 +224,7 @@ impl Default for MappingConfig {
             refine: scarp_slam::mapping::RefineConfig::default(),
             odometry: scarp_slam::odometry::OdometryConfig::default(),
             keyframes: scarp_slam::keyframes::KeyframeConfig::default(),
+            fly_on_odometry: false,
         }
     }
 }

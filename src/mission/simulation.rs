@@ -372,12 +372,13 @@ impl<'a> Mission<'a> {
         Ok(())
     }
 
-    /// What the controller's position estimate is off by: while mapping, the vehicle flies on
-    /// the map's odometry (anchored at the state estimate when mapping began, so the rings stay
+    /// What the controller's position estimate is off by: while mapping (with
+    /// `mapping.fly_on_odometry`), the vehicle flies on the map's odometry (anchored at the state estimate when mapping began, so the rings stay
     /// put around the rock while the GPS walk wanders); otherwise on the state estimate.
     fn navigation_error_m(&self) -> Vector3<f64> {
         self.mapping
             .as_ref()
+            .filter(|_| self.inputs.config.mapping.fly_on_odometry)
             .and_then(MappingSession::navigation_error_m)
             .unwrap_or_else(|| self.estimator.position_drift_m())
     }
