@@ -64,8 +64,9 @@ pub struct BaseRingConfig {
     /// clearance and level with a pedestal's top (rocks stand on pedestals about 1 m tall).
     pub height_above_bottom_m: f64,
     /// Camera pitch below the horizon on this ring (degrees, may be negative for looking
-    /// up). Default 5: the vertical field of view (±32° at the default camera) then spans the
-    /// pedestal's foot and the rock's top from 1.5 m away.
+    /// up). Default 20: the vertical field of view (±32° at the default camera) still reaches
+    /// 12° above the horizon, over the neck, and keeps enough near ground in view for the
+    /// odometry (at 5° the far background dominated it and the odometry drifted by centimetres).
     pub camera_pitch_down_deg: f64,
     /// If the ring is too close to terrain or rocks, it is first widened in steps of the
     /// clearance repair step up to this much (m), which keeps its level view. Default 2.
@@ -80,7 +81,7 @@ impl Default for BaseRingConfig {
         Self {
             enabled: true,
             height_above_bottom_m: 1.8,
-            camera_pitch_down_deg: 5.0,
+            camera_pitch_down_deg: 20.0,
             max_widen_m: 2.0,
             max_raise_m: 1.0,
         }
@@ -779,11 +780,11 @@ mod tests {
         let plan = plan_mapping_rings(&cyl, &start, &CameraConfig::default(), &cfg).unwrap();
         let base = plan.rings[0];
         assert!((base.z_m - 1.8).abs() < 1e-12);
-        assert_eq!(base.camera_pitch_down_deg, 5.0);
+        assert_eq!(base.camera_pitch_down_deg, 20.0);
         assert_ne!(base.counter_clockwise, plan.rings[1].counter_clockwise);
-        // Its band, 1.5 m out with β = 40°, spans z − 1.5·tan 25° .. z + 1.5·tan 15°.
-        assert!((base.band_bottom_m - (1.8 - 1.5 * 25f64.to_radians().tan())).abs() < 1e-9);
-        assert!((base.band_top_m - (1.8 + 1.5 * 15f64.to_radians().tan())).abs() < 1e-9);
+        // Its band, 1.5 m out with β = 40°, spans z − 1.5·tan 40° .. z + 1.5·tan 0°.
+        assert!((base.band_bottom_m - (1.8 - 1.5 * 40f64.to_radians().tan())).abs() < 1e-9);
+        assert!((base.band_top_m - 1.8).abs() < 1e-9);
         // The path reaches the base ring before any other.
         let first_on_ring = plan.path.waypoints[plan.ring_waypoints[0].start];
         assert!((first_on_ring.position_m.z - 1.8).abs() < 1e-12);
@@ -813,9 +814,9 @@ mod tests {
         )
         .unwrap();
         let (z0, z1) = (plan.rings[0].z_m, plan.rings[1].z_m);
-        assert_eq!(plan.camera_pitch_down_deg_at(z0 - 1.0, 55.0), 5.0);
-        assert_eq!(plan.camera_pitch_down_deg_at(z0, 55.0), 5.0);
-        assert!((plan.camera_pitch_down_deg_at(0.5 * (z0 + z1), 55.0) - 30.0).abs() < 1e-9);
+        assert_eq!(plan.camera_pitch_down_deg_at(z0 - 1.0, 55.0), 20.0);
+        assert_eq!(plan.camera_pitch_down_deg_at(z0, 55.0), 20.0);
+        assert!((plan.camera_pitch_down_deg_at(0.5 * (z0 + z1), 55.0) - 37.5).abs() < 1e-9);
         assert_eq!(plan.camera_pitch_down_deg_at(z1 + 10.0, 55.0), 55.0);
         let empty = RingPlan {
             rings: Vec::new(),

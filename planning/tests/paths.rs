@@ -460,7 +460,7 @@ fn base_ring_too_close_is_widened_level() {
     )
     .unwrap();
     let base = plan.rings[0];
-    assert_eq!(base.camera_pitch_down_deg, 5.0);
+    assert_eq!(base.camera_pitch_down_deg, 20.0);
     assert!(
         (base.z_m - 1.8).abs() < 1e-12,
         "kept its height: {}",
