@@ -3,7 +3,7 @@
 //! scores well against its ground truth (reduced version of the 120-frame figure).
 
 mod common;
-use common::{read_json as json, scarp_stdout as scarp};
+use common::{first_rock_centroid_m, read_json as json, scarp_stdout as scarp};
 
 #[test]
 fn map_and_evaluate_default_orbit() {
@@ -19,14 +19,7 @@ fn map_and_evaluate_default_orbit() {
         "--out",
         &d("seq"),
     ]);
-    scarp(&["world", "--out", &d("world")]);
-    let world = json(&dir.path().join("world/world.json"));
-    let c = &world["rocks"][0]["centroid"];
-    let (x, y, z) = (
-        c[0].as_f64().unwrap(),
-        c[1].as_f64().unwrap(),
-        c[2].as_f64().unwrap(),
-    );
+    let [x, y, z] = first_rock_centroid_m(dir.path());
     let roi = format!("cyl:{x},{y},{},{},1.2", z - 1.6, z + 1.2);
     scarp(&[
         "map",

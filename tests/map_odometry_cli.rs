@@ -4,7 +4,7 @@
 //! issues 4 and 5 come from the commands in `src/cli/map.rs`.
 
 mod common;
-use common::{read_json as json, scarp_stdout as scarp};
+use common::{first_rock_centroid_m, read_json as json, scarp_stdout as scarp};
 
 fn number(map: &serde_json::Value, key: &str) -> f64 {
     map[key]
@@ -25,14 +25,7 @@ fn odometry_mapping_and_bundle_adjustment() {
         "--out",
         &d("seq"),
     ]);
-    scarp(&["world", "--out", &d("world")]);
-    let world = json(&dir.path().join("world/world.json"));
-    let c = &world["rocks"][0]["centroid"];
-    let (x, y, z) = (
-        c[0].as_f64().unwrap(),
-        c[1].as_f64().unwrap(),
-        c[2].as_f64().unwrap(),
-    );
+    let [x, y, z] = first_rock_centroid_m(dir.path());
     // Tall: the odometry map is anchored at the first state estimate, metres off vertically.
     let roi = format!("cyl:{x},{y},{},{},2.5", z - 4.0, z + 4.0);
     scarp(&[

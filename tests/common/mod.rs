@@ -39,3 +39,13 @@ pub fn read_json(path: &Path) -> serde_json::Value {
 pub fn path_str(p: &Path) -> &str {
     p.to_str().expect("a UTF-8 temporary path")
 }
+
+/// Writes the default world into `dir/world` with `scarp world` and returns the centroid of its
+/// first rock (the orbit's target), world ENU metres.
+pub fn first_rock_centroid_m(dir: &Path) -> [f64; 3] {
+    let out = dir.join("world");
+    scarp_ok(&["world", "--out", path_str(&out)]);
+    let world = read_json(&out.join("world.json"));
+    let c = &world["rocks"][0]["centroid"];
+    [0, 1, 2].map(|k| c[k].as_f64().expect("a numeric centroid"))
+}
