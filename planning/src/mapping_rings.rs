@@ -302,6 +302,11 @@ impl RingPlan {
             })
     }
 
+    /// Whether the plan flies the base ring (the ring that follows the terrain).
+    pub fn flies_base_ring(&self) -> bool {
+        self.rings.iter().any(|r| r.follows_terrain)
+    }
+
     /// The parts of [z_bottom, z_top] that no band covers (m). Empty when covered.
     pub fn coverage_gaps(&self) -> Vec<(f64, f64)> {
         let mut bands = self.vertical_coverage();
@@ -617,8 +622,8 @@ fn ring_clearance(
 /// [`PlanError::TargetBelowTerrain`] if the cylinder's centre is underground, and with
 /// [`PlanError::Clearance`] if no repair within `ccfg.max_raise_m` works.
 ///
-/// When the base ring makes the plan fail (its approach or transitions blocked), the plan is
-/// made again without it, and [`Repair::DroppedRing`] says so: the paper's rings alone still
+/// When the base ring makes the plan fail (no widening or raise within its limits clears it,
+/// or the way to or from it is blocked), the plan is made again without it, and [`Repair::DroppedRing`] says so: the paper's rings alone still
 /// map the rock.
 pub fn plan_mapping_rings_clear(
     cylinder: &VerticalCylinder,
@@ -680,26 +685,17 @@ fn plan_rings_clear_once(
             rings.push(*ring);
             continue;
         }
-        let base = (cfg.base_ring.enabled && k == 0).then_some(&cfg.base_ring);
-        match repair_ring(ring, k, base, cylinder, &flown, env, ccfg) {
-            Some((cand, rep)) => {
-                rings.push(cand);
-                repairs.push(rep);
-            }
-            // The base ring is an extra: without it the paper's rings still map the rock.
-            None if base.is_some() => repairs.push(Repair::DroppedRing {
-                ring: k,
-                reason: report
-                    .to_error("no widening or raise within the base ring's limits clears it")
-                    .to_string(),
-            }),
-            None => {
-                return Err(report.to_error(format!(
-                    "ring {k} at z = {:.2} m: neither sliding out nor raising by up to {} m clears it",
-                    ring.z_m, ccfg.max_raise_m
-                )));
-            }
-        }
+        // The base ring is the one that follows the terrain; when it cannot be cleared, the
+        // error sends `plan_mapping_rings_clear` back to the paper's rings alone.
+        let base = ring.follows_terrain.then_some(&cfg.base_ring);
+        let Some((cand, rep)) = repair_ring(ring, k, base, cylinder, &flown, env, ccfg) else {
+            return Err(report.to_error(format!(
+                "ring {k} at z = {:.2} m: no move within its repair limits clears it",
+                ring.z_m
+            )));
+        };
+        rings.push(cand);
+        repairs.push(rep);
     }
     let n = cfg.waypoints_per_ring;
     let mut out = assemble(

@@ -372,9 +372,10 @@ impl<'a> Mission<'a> {
         Ok(())
     }
 
-    /// What the controller's position estimate is off by: while mapping (with
-    /// `mapping.fly_on_odometry`), the vehicle flies on the map's odometry (anchored at the state estimate when mapping began, so the rings stay
-    /// put around the rock while the GPS walk wanders); otherwise on the state estimate.
+    /// What the controller's position estimate is off by: while mapping with
+    /// `mapping.fly_on_odometry`, the vehicle flies on the map's odometry (anchored at the state
+    /// estimate when mapping began, so the rings stay put around the rock while the GPS walk
+    /// wanders); otherwise on the state estimate.
     fn navigation_error_m(&self) -> Vector3<f64> {
         self.mapping
             .as_ref()
@@ -627,11 +628,7 @@ impl<'a> Mission<'a> {
         match result {
             Ok(rings) => {
                 if let Some(m) = self.targets.get_mut(&id) {
-                    let camera = &self.inputs.config.planning.camera;
-                    m.report.base_ring_flown = rings
-                        .rings
-                        .iter()
-                        .any(|r| r.camera_pitch_down_deg != camera.pitch_down_deg);
+                    m.report.base_ring_flown = rings.flies_base_ring();
                     m.report.ring_repairs.clone_from(&rings.repairs);
                 }
                 self.ring_plan = Some(rings);
