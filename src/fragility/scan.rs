@@ -20,6 +20,7 @@ use scarp_slam::TriangleMesh;
 use scarp_slam::geometry::{convex_hull_2d, polygon_signed_area};
 
 use super::FragilityError;
+use super::topology::weld_key;
 
 /// Slab thickness of the extent profile, metres.
 const SLAB_M: f64 = 0.02;
@@ -167,10 +168,7 @@ fn welded_vertices(mesh: &TriangleMesh) -> Vec<u32> {
     mesh.positions
         .iter()
         .enumerate()
-        .map(|(i, p)| {
-            let key = [p.x, p.y, p.z].map(|c| (c + 0.0).to_bits());
-            *first_at.entry(key).or_insert(i as u32)
-        })
+        .map(|(i, p)| *first_at.entry(weld_key(p)).or_insert(i as u32))
         .collect()
 }
 

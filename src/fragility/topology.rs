@@ -67,6 +67,12 @@ pub struct MeshRepairs {
     pub flipped_shells: usize,
 }
 
+/// The key under which vertices are welded: their bit-identical position (+0.0 and −0.0
+/// count as equal).
+pub(crate) fn weld_key(p: &Point3<f32>) -> [u32; 3] {
+    [p.x, p.y, p.z].map(|c| (c + 0.0).to_bits())
+}
+
 /// Welds, drops index-degenerate faces, checks that the surface is a closed, consistently wound
 /// 2-manifold, flips inward shells and rotates into the levelled frame (`levelled_from_input`).
 ///
@@ -95,7 +101,7 @@ pub(crate) fn prepare(
     let mut remap = Vec::with_capacity(mesh.positions.len());
     let mut kept: Vec<u32> = Vec::new(); // input index of each kept vertex
     for (i, p) in mesh.positions.iter().enumerate() {
-        let key = [p.x, p.y, p.z].map(|c| (c + 0.0).to_bits());
+        let key = weld_key(p);
         let next = kept.len() as u32;
         let id = *first_at.entry(key).or_insert(next);
         if id == next {

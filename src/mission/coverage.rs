@@ -114,7 +114,7 @@ impl CylinderCoverage {
 
     /// Fraction of cells seen, in `[0, 1]`.
     pub fn fraction(&self) -> f64 {
-        self.seen.iter().filter(|&&s| s).count() as f64 / self.seen.len() as f64
+        seen_fraction(self.seen.iter())
     }
 
     /// Fraction of the bottom band's cells seen: how well the base was viewed.
