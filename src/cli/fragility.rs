@@ -26,8 +26,9 @@ pub struct FragilityArgs {
     #[arg(long)]
     pub pedestal: Option<PathBuf>,
     /// The mesh is an open scan of the rock standing on its pedestal or the ground (z up), as
-    /// `scarp map` and `scarp simulate` write it: find the neck, cut the rock off there and
-    /// close it before the analysis (see `fragility::scan`).
+    /// `scarp map` and `scarp simulate` write it: find the support's top under the neck, cut
+    /// the rock off above it, extrapolate the contact polygon from the rock's basal profile and
+    /// close the rock before the analysis (see `fragility::scan`).
     #[arg(long, conflicts_with_all = ["pedestal", "contact_height"])]
     pub scan: bool,
     /// Print the full report as JSON on stdout instead of a summary.
@@ -146,21 +147,25 @@ pub fn summary(report: &FragilityReport) -> String {
 pub fn run(args: FragilityArgs) -> anyhow::Result<()> {
     let config = load_config(&args)?;
     let mut mesh = read_mesh(&args.mesh)?;
+    let mut scan_contact = None;
     if args.scan {
         let closed = close_scan(&mesh)
             .with_context(|| format!("closing the scan {}", args.mesh.display()))?;
         tracing::info!(
-            neck_m = closed.contact_height_m,
+            contact_m = closed.contact_height_m,
+            support_plane = closed.support_plane_found,
             loops = closed.loops_closed,
-            "scan cut at its neck and closed"
+            "scan cut above its support and closed"
         );
         mesh = closed.mesh;
+        scan_contact = Some(closed.contact_polygon);
     }
     let pedestal = args.pedestal.as_deref().map(read_mesh).transpose()?;
-    let contact = match (&pedestal, args.contact_height) {
-        (Some(p), _) => ContactSpec::Pedestal(p),
-        (None, Some(h)) => ContactSpec::Height(h),
-        (None, None) => ContactSpec::Auto,
+    let contact = match (&pedestal, args.contact_height, &scan_contact) {
+        (Some(p), _, _) => ContactSpec::Pedestal(p),
+        (None, Some(h), _) => ContactSpec::Height(h),
+        (None, None, Some(polygon)) => ContactSpec::Polygon(polygon),
+        (None, None, None) => ContactSpec::Auto,
     };
     tracing::info!(mesh = %args.mesh.display(), faces = mesh.faces.len(), "fragility analysis");
     let analysis = analyze_detailed(&mesh, contact, &config)

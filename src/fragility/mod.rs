@@ -239,6 +239,12 @@ pub enum ContactSpec<'a> {
     /// by at most [`FragilityConfig::pedestal_gap_tolerance_m`]); the contact polygon is the rock's
     /// base there clipped by the pedestal's top.
     Pedestal(&'a TriangleMesh),
+    /// A contact polygon measured elsewhere, such as the basal profile of a scan
+    /// ([`scan::close_scan`]): points in the input frame, metres. The contact plane is at their
+    /// mean height along up and the polygon is their convex hull in it, taken as the rock's
+    /// support as it is (not clipped by the rock's own section, which for a closed scan is only a
+    /// patched cut). The rock is the part of the mesh above the plane.
+    Polygon(&'a [[f64; 3]]),
 }
 
 /// How the contact was found.
@@ -253,6 +259,8 @@ pub enum ContactMethod {
     Height,
     /// The top of a pedestal mesh.
     Pedestal,
+    /// A given contact polygon.
+    Polygon,
 }
 
 /// α in two opposite directions.
@@ -360,8 +368,11 @@ impl FragilityAnalysis {
 pub(crate) enum Support<'a> {
     /// The part of this solid just below the contact plane.
     Below(&'a Solid),
-    /// A fixed convex polygon (levelled xy).
+    /// A fixed convex polygon (levelled xy), clipped by the rock's section.
     Fixed(&'a [Point2<f64>]),
+    /// The contact polygon itself (levelled xy), at the given height even below the rock's
+    /// lowest point.
+    Exact(&'a [Point2<f64>]),
 }
 
 /// One evaluation of the rock at a contact height.
@@ -395,25 +406,29 @@ pub(crate) fn evaluate(
             z_max_m: z_max,
         });
     }
+    let plane = h;
     let h = h.max(z_min);
     let cut = cut_above(rock, h)?;
     let integrals = mass::integrate(&cut.solid)?;
     let mass = MassProperties::from_integrals(&integrals, config.density_kg_m3);
-    let upper = rocking::convex_hull(&contact::points_above(&cut.solid, h, band_m));
-    let lower = match support {
-        Support::Below(full) => {
-            if full.z_range().is_some_and(|(lo, _)| lo < h) {
-                rocking::convex_hull(&contact::points_below(full, h, band_m, false))
+    let (hull, contact_height) = match support {
+        Support::Exact(hull) => (hull.to_vec(), plane),
+        Support::Below(_) | Support::Fixed(_) => {
+            let upper = rocking::convex_hull(&contact::points_above(&cut.solid, h, band_m));
+            let lower = match support {
+                Support::Below(full) if full.z_range().is_some_and(|(lo, _)| lo < h) => {
+                    rocking::convex_hull(&contact::points_below(full, h, band_m, false))
+                }
+                Support::Fixed(hull) => hull.to_vec(),
+                _ => Vec::new(),
+            };
+            let hull = if lower.len() >= 3 && upper.len() >= 3 {
+                rocking::clip_convex(&upper, &lower)
             } else {
-                Vec::new()
-            }
+                upper
+            };
+            (hull, h)
         }
-        Support::Fixed(hull) => hull.to_vec(),
-    };
-    let hull = if lower.len() >= 3 && upper.len() >= 3 {
-        rocking::clip_convex(&upper, &lower)
-    } else {
-        upper
     };
     let com = mass.center_of_mass;
     let min = rocking::minimum_support(&hull, &com.xy()).ok_or_else(|| {
@@ -421,12 +436,12 @@ pub(crate) fn evaluate(
             "the rock and its support do not overlap at the contact height {h} m"
         ))
     })?;
-    let com_height = com.z - h;
+    let com_height = com.z - contact_height;
     Ok(Evaluation {
         alpha_min_rad: min.distance_m.atan2(com_height),
         cut,
         mass,
-        contact_height: h,
+        contact_height,
         hull,
         min,
         com_height,
@@ -473,6 +488,7 @@ pub fn analyze_detailed(
         ContactSpec::Pedestal(p) => Some(prepare(p, "pedestal", &levelled_from_input)?.0),
         _ => None,
     };
+    // The support polygon from a pedestal mesh or a given contact polygon (levelled xy).
     let (h, method, pedestal_hull) = match contact {
         ContactSpec::Auto => {
             let neck = contact::find_neck(
@@ -526,9 +542,14 @@ pub fn analyze_detailed(
             }
             (top.max(rock_lo), ContactMethod::Pedestal, Some(hull))
         }
+        ContactSpec::Polygon(points) => {
+            let (h, hull) = levelled_polygon(points, &levelled_from_input)?;
+            (h, ContactMethod::Polygon, Some(hull))
+        }
     };
 
     let support = match &pedestal_hull {
+        Some(hull) if method == ContactMethod::Polygon => Support::Exact(hull),
         Some(hull) => Support::Fixed(hull),
         None => Support::Below(&solid),
     };
@@ -579,6 +600,7 @@ pub fn analyze_detailed(
 
     // Uncertainty.
     let sample_support = match &pedestal_hull {
+        Some(hull) if method == ContactMethod::Polygon => SampleSupport::Exact(hull),
         Some(hull) => SampleSupport::Fixed(hull),
         None => SampleSupport::SelfBelow,
     };
@@ -643,6 +665,35 @@ pub fn analyze_detailed(
         alpha_min_azimuth: theta,
         input_from_levelled,
     })
+}
+
+/// The height along up (mean levelled z) and the convex hull (levelled xy) of a given contact
+/// polygon.
+///
+/// # Errors
+/// [`FragilityError::Degenerate`] for non-finite points or a polygon with no area.
+fn levelled_polygon(
+    points: &[[f64; 3]],
+    levelled_from_input: &Rotation3<f64>,
+) -> Result<(f64, Vec<Point2<f64>>), FragilityError> {
+    if points.iter().flatten().any(|c| !c.is_finite()) {
+        return Err(FragilityError::Degenerate(
+            "the given contact polygon has a non-finite point".into(),
+        ));
+    }
+    let levelled: Vec<Point3<f64>> = points
+        .iter()
+        .map(|p| levelled_from_input * Point3::from(*p))
+        .collect();
+    let hull = rocking::convex_hull(&levelled.iter().map(|p| p.xy()).collect::<Vec<_>>());
+    if hull.len() < 3 || rocking::polygon_area(&hull) <= 0.0 {
+        return Err(FragilityError::Degenerate(format!(
+            "the given contact polygon ({} points) encloses no area",
+            points.len()
+        )));
+    }
+    let h = levelled.iter().map(|p| p.z).sum::<f64>() / levelled.len() as f64;
+    Ok((h, hull))
 }
 
 /// A closed solid: the part of a mesh above a height, with its cut closed.

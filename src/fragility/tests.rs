@@ -607,3 +607,50 @@ proptest! {
         let _ = cut_and_close(&mesh, [0.0, 0.0, 1.0], h);
     }
 }
+
+#[test]
+fn a_given_contact_polygon_is_the_support() {
+    // A 1 × 1 × 2 m block on a 0.5 m square contact under its centre, given 1 cm below the
+    // block (as a scan's plane sits below its cut): α = atan(0.25 / 1.01) in the four face
+    // directions.
+    let block = to_mesh(&cuboid_solid([1.0, 1.0, 2.0]));
+    let square = [
+        [0.25, 0.25, -0.01],
+        [0.75, 0.25, -0.01],
+        [0.75, 0.75, -0.01],
+        [0.25, 0.75, -0.01],
+    ];
+    let r = analyze(
+        &block,
+        ContactSpec::Polygon(&square),
+        &FragilityConfig::default(),
+    )
+    .unwrap();
+    assert_eq!(r.contact_method, ContactMethod::Polygon);
+    assert!((r.contact_height_m + 0.01).abs() < 1e-12);
+    assert!((r.contact_area_m2 - 0.25).abs() < 1e-9);
+    let expected = 0.25f64.atan2(1.01).to_degrees();
+    assert!(
+        (r.alpha_min_deg - expected).abs() < 1e-6,
+        "{} vs {expected}",
+        r.alpha_min_deg
+    );
+
+    let line = [[0.0, 0.0, 0.0], [0.5, 0.5, 0.0], [1.0, 1.0, 0.0]];
+    let flat = analyze(
+        &block,
+        ContactSpec::Polygon(&line),
+        &FragilityConfig::default(),
+    );
+    assert!(
+        matches!(flat, Err(FragilityError::Degenerate(_))),
+        "{flat:?}"
+    );
+    let nan = [[f64::NAN, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
+    let bad = analyze(
+        &block,
+        ContactSpec::Polygon(&nan),
+        &FragilityConfig::default(),
+    );
+    assert!(matches!(bad, Err(FragilityError::Degenerate(_))), "{bad:?}");
+}

@@ -82,6 +82,8 @@ pub(crate) enum SampleSupport<'a> {
     SelfBelow,
     /// A fixed support polygon (from a pedestal mesh).
     Fixed(&'a [Point2<f64>]),
+    /// A given contact polygon.
+    Exact(&'a [Point2<f64>]),
 }
 
 /// Runs the perturbed analyses of `rock` around `contact_height_m` and summarises α_min.
@@ -117,6 +119,7 @@ pub(crate) fn alpha_min_spread(
             let support = match support {
                 SampleSupport::SelfBelow => Support::Below(&noisy),
                 SampleSupport::Fixed(hull) => Support::Fixed(hull),
+                SampleSupport::Exact(hull) => Support::Exact(hull),
             };
             evaluate(&noisy, contact_height_m + dh, &support, band, config)
                 .ok()

@@ -33,8 +33,8 @@ use crate::evaluation::mesh::{MeshEvalConfig, MeshEvaluation, Visibility, evalua
 use crate::evaluation::trajectory::{
     Alignment, TrajectoryEvalConfig, evaluate_trajectory, umeyama,
 };
-use crate::fragility::scan::close_scan;
-use crate::fragility::{ContactSpec, analyze, analyze_detailed};
+use crate::fragility::scan::analyze_scan;
+use crate::fragility::{ContactSpec, analyze};
 
 /// A frame kept for bundle adjustment and re-integration.
 #[derive(Debug, Clone)]
@@ -311,8 +311,7 @@ pub fn finish_target(
     let clock = Instant::now();
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     // The scan is open (ROI cut, unseen parts): separate the rock at its neck and close it.
-    let fragility = close_scan(&mesh)
-        .and_then(|closed| analyze_detailed(&closed.mesh, ContactSpec::Auto, &config.fragility));
+    let fragility = analyze_scan(&mesh, &config.fragility).map(|(_, analysis)| analysis);
     let mut mapped = complete;
     match &fragility {
         Ok(analysis) => {
