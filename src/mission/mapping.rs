@@ -2,9 +2,10 @@
 //! cylinder region of interest (plus a margin), the coverage test that ends it, then bundle
 //! adjustment, re-integration, the mesh, fragility and export.
 //!
-//! Frames whose view misses the region of interest are not mapped at all. Only keyframes are
-//! kept (without their instance masks) for bundle adjustment and re-integration; the rest are
-//! dropped after fusion, so memory grows with the distance flown, not with the camera rate.
+//! Frames whose view misses the region of interest are not mapped at all. Keyframes are kept
+//! (without their instance masks) for bundle adjustment and re-integration, and every n-th
+//! frame between them for re-integration (`mapping.reintegration_frame_stride`); the rest are
+//! dropped after fusion.
 
 use std::path::Path;
 use std::time::Instant;
@@ -18,7 +19,7 @@ use scarp_export::ply::{PlyEncoding, write_mesh, write_point_cloud};
 use scarp_export::tum::StampedPose;
 use scarp_planning::prelude::VerticalCylinder;
 use scarp_slam::mapping::{
-    KeyframeSet, ModelTracker, ModelTrackingConfig, RefineConfig, refine_keyframes,
+    BetweenFrame, KeyframeSet, ModelTracker, ModelTrackingConfig, RefineConfig, refine_keyframes,
 };
 use scarp_slam::meshing::MeshingConfig;
 use scarp_slam::tsdf::Roi;
@@ -60,6 +61,10 @@ pub struct MappingSession {
     tracker: ModelTracker,
     coverage: CylinderCoverage,
     stored: Vec<StoredFrame>,
+    /// Frames kept between keyframes for the re-integration.
+    between: Vec<BetweenFrame>,
+    /// Keep every n-th mapped frame in `between` (0: none).
+    between_stride: usize,
     frames_mapped: usize,
     /// The last mapped frame's odometry position minus its true position (simulation only:
     /// what a controller flying on the odometry would be off by).
@@ -145,6 +150,8 @@ impl MappingSession {
             tracker: ModelTracker::new(*camera, tracking)?,
             coverage: CylinderCoverage::new(cylinder, config.coverage),
             stored: Vec::new(),
+            between: Vec::new(),
+            between_stride: m.reintegration_frame_stride,
             frames_mapped: 0,
             navigation_error_m: None,
         })
@@ -203,6 +210,15 @@ impl MappingSession {
                 world_from_camera_estimate: *world_from_camera_estimate,
                 world_from_camera_truth: *world_from_camera_truth,
                 odometry_covariance: tracked.keyframe_covariance,
+            });
+        } else if self.between_stride > 0
+            && self.frames_mapped.is_multiple_of(self.between_stride)
+            && !self.stored.is_empty()
+        {
+            self.between.push(BetweenFrame {
+                keyframe: self.stored.len() - 1,
+                frame,
+                world_from_camera_odometry: tracked.world_from_camera,
             });
         }
         self.frames_mapped += 1;
@@ -279,7 +295,10 @@ pub fn finish_target(
             world_from_camera: f.world_from_camera_truth,
         })
         .collect();
-    let mut keyframes = KeyframeSet::default();
+    let mut keyframes = KeyframeSet {
+        between_frames: session.between,
+        ..KeyframeSet::default()
+    };
     for f in stored {
         keyframes
             .world_from_camera_odometry

@@ -109,14 +109,85 @@ pub struct KeyframeSet {
     /// ([`super::TrackedFrame::keyframe_covariance`]); entry 0 is not used. `None` leaves that
     /// pair without a relative prior.
     pub odometry_covariance: Vec<Option<Matrix6<f64>>>,
+    /// Frames between keyframes that are not adjusted but re-integrated, in flight order. Each
+    /// is fused at its odometry pose moved by its keyframe's adjustment,
+    /// `refined_k · odometry_k⁻¹ · odometry_frame`. Keyframes alone are too sparse for a
+    /// fragility-grade surface: their fusion leaves holes and noise that more views fill.
+    pub between_frames: Vec<BetweenFrame>,
+}
+
+/// A frame re-integrated with its keyframe's correction (see [`KeyframeSet::between_frames`]).
+#[derive(Debug, Clone)]
+pub struct BetweenFrame {
+    /// Index of the keyframe it was tracked after (the last one at or before it).
+    pub keyframe: usize,
+    /// The frame.
+    pub frame: RgbdFrame,
+    /// Its pose from odometry.
+    pub world_from_camera_odometry: Isometry3<f64>,
+}
+
+impl KeyframeSet {
+    /// Every frame to fuse, keyframes and the frames between them, in flight order, with its
+    /// pose: keyframe k at `keyframe_poses[k]`, a frame between at its odometry pose moved by
+    /// its keyframe's correction `keyframe_poses[k] · odometry_k⁻¹`.
+    ///
+    /// # Errors
+    /// [`MappingError::InvalidInput`] when `keyframe_poses` does not match the keyframes or a
+    /// frame between names a keyframe that does not exist.
+    pub fn fusion_order(
+        &self,
+        keyframe_poses: &[Isometry3<f64>],
+    ) -> Result<Vec<(&RgbdFrame, Isometry3<f64>)>, MappingError> {
+        if keyframe_poses.len() != self.frames.len()
+            || self.world_from_camera_odometry.len() != self.frames.len()
+        {
+            return Err(MappingError::InvalidInput(format!(
+                "{} keyframe poses for {} keyframes",
+                keyframe_poses.len(),
+                self.frames.len()
+            )));
+        }
+        let mut order = Vec::with_capacity(self.frames.len() + self.between_frames.len());
+        let mut between = self.between_frames.iter().peekable();
+        for (k, (frame, pose)) in self.frames.iter().zip(keyframe_poses).enumerate() {
+            order.push((frame, *pose));
+            let correction = pose * self.world_from_camera_odometry[k].inverse();
+            while let Some(b) = between.next_if(|b| b.keyframe == k) {
+                order.push((&b.frame, correction * b.world_from_camera_odometry));
+            }
+        }
+        if let Some(b) = between.next() {
+            return Err(MappingError::InvalidInput(format!(
+                "a frame between keyframes follows keyframe {} of {} (out of range or out of \
+                 order)",
+                b.keyframe,
+                self.frames.len()
+            )));
+        }
+        Ok(order)
+    }
+}
+
+/// Fuses `(frame, world_from_camera)` pairs in order into a fresh volume.
+fn fuse_in_order(
+    camera: &PinholeCamera,
+    order: &[(&RgbdFrame, Isometry3<f64>)],
+    tsdf: &TsdfConfig,
+) -> Result<TsdfVolume, MappingError> {
+    let mut volume = TsdfVolume::new(tsdf.clone())?;
+    for (frame, pose) in order {
+        volume.integrate(frame, camera, pose)?;
+    }
+    Ok(volume)
 }
 
 /// The outcome of [`refine_keyframes`].
 #[derive(Debug, Clone)]
 pub struct RefinedMap {
-    /// Mesh of the keyframes re-integrated at the refined poses.
+    /// Mesh of the keyframes (and the frames between them) re-integrated at the refined poses.
     pub mesh: TriangleMesh,
-    /// Mesh of the keyframes at their odometry poses (with `mesh_before`).
+    /// Mesh of the same frames at their odometry poses (with `mesh_before`).
     pub mesh_before: Option<TriangleMesh>,
     /// Keyframe poses after bundle adjustment.
     pub world_from_camera: Vec<Isometry3<f64>>,
@@ -266,19 +337,14 @@ pub fn refine_keyframes(
     let ba_ms = started.elapsed().as_secs_f64() * 1e3;
 
     let mesh_before = if config.mesh_before {
-        Some(fuse_and_mesh(
-            camera,
-            &keyframes.frames,
-            &keyframes.world_from_camera_odometry,
-            &config.tsdf,
-            &config.meshing,
-        )?)
+        let order = keyframes.fusion_order(&keyframes.world_from_camera_odometry)?;
+        let volume = fuse_in_order(camera, &order, &config.tsdf)?;
+        Some(extract_mesh(&volume, &config.meshing))
     } else {
         None
     };
     let started = Instant::now();
-    let mut volume = TsdfVolume::new(config.tsdf.clone())?;
-    volume.reintegrate(&keyframes.frames, camera, &poses)?;
+    let volume = fuse_in_order(camera, &keyframes.fusion_order(&poses)?, &config.tsdf)?;
     let reintegrate_ms = started.elapsed().as_secs_f64() * 1e3;
     let started = Instant::now();
     let mesh = extract_mesh(&volume, &config.meshing);
@@ -377,4 +443,70 @@ fn reject_outliers(
         );
     }
     kept
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::image::Image;
+    use nalgebra::{Translation3, UnitQuaternion};
+
+    fn frame(timestamp_s: f64) -> RgbdFrame {
+        RgbdFrame::new(
+            timestamp_s,
+            Image::filled(4, 3, [0u8; 3]),
+            Image::filled(4, 3, 1.0f32),
+            None,
+        )
+        .unwrap()
+    }
+
+    fn at(x: f64, yaw: f64) -> Isometry3<f64> {
+        Isometry3::from_parts(
+            Translation3::new(x, 0.0, 0.0),
+            UnitQuaternion::from_euler_angles(0.0, 0.0, yaw),
+        )
+    }
+
+    #[test]
+    fn frames_between_keyframes_follow_their_keyframes_correction() {
+        let odometry = vec![at(0.0, 0.0), at(1.0, 0.3)];
+        let between = |keyframe: usize, t: f64, pose: Isometry3<f64>| BetweenFrame {
+            keyframe,
+            frame: frame(t),
+            world_from_camera_odometry: pose,
+        };
+        let set = KeyframeSet {
+            frames: vec![frame(0.0), frame(1.0)],
+            world_from_camera_odometry: odometry.clone(),
+            world_from_camera_estimate: odometry.clone(),
+            odometry_covariance: vec![None, None],
+            between_frames: vec![
+                between(0, 0.5, at(0.5, 0.1)),
+                between(1, 1.5, at(1.5, 0.4)),
+                between(1, 1.6, at(1.6, 0.5)),
+            ],
+        };
+        // The adjustment moves keyframe 0 by 2 cm and turns keyframe 1 by 0.01 rad.
+        let refined = vec![at(0.02, 0.0), at(1.0, 0.31)];
+        let order = set.fusion_order(&refined).unwrap();
+        let stamps: Vec<f64> = order.iter().map(|(f, _)| f.timestamp_s).collect();
+        assert_eq!(stamps, vec![0.0, 0.5, 1.0, 1.5, 1.6]);
+        assert_eq!(order[0].1, refined[0]);
+        assert_eq!(order[2].1, refined[1]);
+        // Between frames keep their odometry pose relative to their keyframe.
+        for (i, k, odometry_frame) in [(1, 0, at(0.5, 0.1)), (3, 1, at(1.5, 0.4))] {
+            let relative_before = odometry[k].inverse() * odometry_frame;
+            let relative_after = refined[k].inverse() * order[i].1;
+            assert!(
+                (relative_after.to_homogeneous() - relative_before.to_homogeneous()).norm() < 1e-12
+            );
+        }
+        assert!((order[1].1.translation.x - 0.52).abs() < 1e-12);
+
+        let mut bad = set.clone();
+        bad.between_frames.push(between(2, 2.0, at(2.0, 0.0)));
+        assert!(bad.fusion_order(&refined).is_err());
+        assert!(set.fusion_order(&refined[..1]).is_err());
+    }
 }
