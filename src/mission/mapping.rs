@@ -16,7 +16,7 @@ use scarp_datasets::world::World;
 use scarp_export::atomic::write_bytes_atomically;
 use scarp_export::glb::{GlbNode, GlbOptions, write_glb};
 use scarp_export::ply::{PlyEncoding, write_mesh, write_point_cloud};
-use scarp_export::tum::StampedPose;
+use scarp_export::tum::{StampedPose, write_tum_trajectory};
 use scarp_planning::prelude::VerticalCylinder;
 use scarp_slam::mapping::{
     BetweenFrame, KeyframeSet, ModelTracker, ModelTrackingConfig, RefineConfig, refine_keyframes,
@@ -226,6 +226,49 @@ impl MappingSession {
     }
 }
 
+/// Writes the keyframes' trajectories (TUM, `world_from_camera`): `keyframes_odometry.txt`,
+/// `keyframes_ba.txt` (both in the map frame) and `keyframes_groundtruth.txt`, so that the
+/// mapping flight can be inspected with the TUM tools.
+fn write_keyframe_trajectories(
+    dir: &Path,
+    truth: &[StampedPose],
+    odometry: &[Isometry3<f64>],
+    refined: &[Isometry3<f64>],
+) -> anyhow::Result<()> {
+    let stamped = |poses: &[Isometry3<f64>]| -> Vec<StampedPose> {
+        truth
+            .iter()
+            .zip(poses)
+            .map(|(t, p)| StampedPose {
+                timestamp_s: t.timestamp_s,
+                world_from_camera: *p,
+            })
+            .collect()
+    };
+    for (name, poses, comment) in [
+        (
+            "keyframes_odometry.txt",
+            stamped(odometry),
+            "keyframe world_from_camera from RGBD odometry (map frame)",
+        ),
+        (
+            "keyframes_ba.txt",
+            stamped(refined),
+            "keyframe world_from_camera after bundle adjustment (map frame)",
+        ),
+        (
+            "keyframes_groundtruth.txt",
+            truth.to_vec(),
+            "keyframe true world_from_camera (world frame)",
+        ),
+    ] {
+        let path = dir.join(name);
+        write_tum_trajectory(&path, &poses, comment)
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    Ok(())
+}
+
 /// ATE RMSE (SE(3)-aligned) of `poses` against `truth` (same length and timestamps).
 fn ate_rmse(truth: &[StampedPose], poses: &[Isometry3<f64>]) -> Option<f64> {
     let estimate: Vec<StampedPose> = truth
@@ -353,6 +396,7 @@ pub fn finish_target(
         ));
     }
     write_mesh(dir.join("mesh.ply"), &mesh, PlyEncoding::BinaryLittleEndian)?;
+    write_keyframe_trajectories(dir, &truth, odometry_poses, &refined)?;
     let mut extras = serde_json::json!({"target_id": report.id, "status": if mapped {"mapped"} else {"incomplete"}});
     if let Some(a) = report.alpha_min_deg {
         extras["alpha_min_deg"] = a.into();
