@@ -59,12 +59,29 @@ fn small_world_mission_finds_maps_and_measures_its_target() {
 
     let id = t["id"].as_u64().unwrap().to_string();
     let target_dir = out_dir.join("targets").join(&id);
-    for file in ["mesh.ply", "mesh.glb", "points.ply", "view_below.png"] {
+    for file in [
+        "mesh.ply",
+        "mesh.glb",
+        "points.ply",
+        "view_below.png",
+        "keyframes_odometry.txt",
+        "keyframes_groundtruth.txt",
+    ] {
         assert!(
             target_dir.join(file).is_file(),
             "missing targets/{id}/{file}"
         );
     }
+    // One pose per keyframe in each trajectory file.
+    let keyframes = t["keyframes"].as_u64().unwrap() as usize;
+    for file in ["keyframes_odometry.txt", "keyframes_ba.txt"] {
+        let poses = scarp_export::tum::read_tum_trajectory(&target_dir.join(file)).unwrap();
+        assert_eq!(poses.len(), keyframes, "{file}");
+    }
+    eprintln!(
+        "small world: α_min {} (truth {}), F@2cm {}",
+        t["alpha_min_deg"], t["alpha_min_gt_deg"], t["fscore_2cm"]
+    );
     let mesh = scarp_export::ply::read_mesh(target_dir.join("mesh.ply")).unwrap();
     assert!(mesh.face_count() > 1000);
     scarp_export::glb::read_glb(target_dir.join("mesh.glb")).unwrap();

@@ -24,7 +24,8 @@
 //!    [`MeshRepairs`]: vertices at bit-identical positions are welded, faces that repeat a vertex
 //!    are dropped, and shells wound inwards are flipped.
 //! 2. The contact ([`ContactSpec`]): the neck of the horizontal cross-section area profile, a
-//!    given height, or the top of a given pedestal mesh.
+//!    given height, the top of a given pedestal mesh, or a given contact polygon (for a scan,
+//!    [`scan::analyze_scan`] extrapolates it from the rock's basal profile).
 //! 3. The rock is cut just above the contact plane and closed by triangulating the section
 //!    polygons (ear clipping after bridging holes), then volume, centre of mass and inertia come
 //!    from signed tetrahedra at uniform density.

@@ -63,8 +63,11 @@ pub struct ClosedScan {
 /// Upward-facing faces count toward the support plane when their normal is within this cosine
 /// of +z (18°).
 const UP_COS: f64 = 0.95;
-/// The support plane is searched this far above and below the neck, metres.
-const SUPPORT_SEARCH_M: f64 = 0.08;
+/// The support plane is searched from this far above the neck ...
+const SUPPORT_SEARCH_ABOVE_M: f64 = 0.08;
+/// ... down to this far below it, metres: the rock's underside just above the contact is seen
+/// in pieces, so the narrowest slab that surrounds its axis can sit well above the contact.
+const SUPPORT_SEARCH_BELOW_M: f64 = 0.3;
 /// Upward faces farther than this from the rock's axis are not the support under it, metres.
 const SUPPORT_RADIUS_M: f64 = 1.0;
 /// Height bins of the support-plane search, metres.
@@ -85,6 +88,12 @@ const PROFILE_FIRST_M: f64 = 0.02;
 const PROFILE_LAST_M: f64 = 0.15;
 /// Slabs (the lowest ones measured in a sector) fitted per sector.
 const PROFILE_FIT_SLABS: usize = 4;
+/// A sector counts as seen near the support when its lowest measured slab is centred at most
+/// this high above the plane, metres.
+const PROFILE_NEAR_M: f64 = 0.05;
+/// At least this fraction of the sectors must be seen near the support: a base seen on one
+/// side only extrapolates to a contact in the wrong place.
+const PROFILE_MIN_NEAR_FRACTION: f64 = 2.0 / 3.0;
 
 /// Azimuth sectors a slab's vertices must fill (of [`SECTORS`]) to count: a slab seen from
 /// one side only has a small hull that is not a neck.
@@ -130,7 +139,8 @@ fn sector_of(p: &Point2<f64>, axis_xy: &Point2<f64>, sectors: usize) -> usize {
 }
 
 /// The height of the support's top (pedestal or ground) under a scanned rock: the highest level
-/// within [`SUPPORT_SEARCH_M`] of `neck_z` where upward-facing faces fill at least
+/// from [`SUPPORT_SEARCH_ABOVE_M`] above `neck_z` to [`SUPPORT_SEARCH_BELOW_M`] below it where
+/// upward-facing faces fill at least
 /// [`SUPPORT_MIN_SECTORS`] of [`SECTORS`] sectors around `axis_xy`; the area-weighted mean height
 /// of the faces within a bin of it. `None` when no level qualifies (the support is not seen
 /// all round).
@@ -147,14 +157,15 @@ fn support_plane_height(mesh: &TriangleMesh, axis_xy: &Point2<f64>, neck_z: f64)
             let xy = centre.xy();
             (area2 > 0.0
                 && n.z > UP_COS * area2
-                && (centre.z - neck_z).abs() <= SUPPORT_SEARCH_M
+                && centre.z <= neck_z + SUPPORT_SEARCH_ABOVE_M
+                && centre.z >= neck_z - SUPPORT_SEARCH_BELOW_M
                 && (xy - axis_xy).norm() <= SUPPORT_RADIUS_M)
                 .then(|| (centre.z, 0.5 * area2, sector_of(&xy, axis_xy, SECTORS)))
         })
         .collect();
-    let bins = (2.0 * SUPPORT_SEARCH_M / SUPPORT_BIN_M).ceil() as usize;
+    let bins = ((SUPPORT_SEARCH_ABOVE_M + SUPPORT_SEARCH_BELOW_M) / SUPPORT_BIN_M).ceil() as usize;
     let level = (0..bins).find_map(|i| {
-        let z = neck_z + SUPPORT_SEARCH_M - (i as f64 + 0.5) * SUPPORT_BIN_M;
+        let z = neck_z + SUPPORT_SEARCH_ABOVE_M - (i as f64 + 0.5) * SUPPORT_BIN_M;
         let mut filled = [false; SECTORS];
         for &(fz, _, sector) in &faces {
             if (fz - z).abs() <= 0.5 * SUPPORT_BIN_M {
@@ -199,15 +210,29 @@ fn extrapolated_contact(
             "the scan has no surface just above its support: no basal profile".into(),
         ));
     }
-    let axis_xy = profile_points
-        .iter()
-        .fold(Point2::origin(), |acc, (p, _)| acc + p.coords)
-        / profile_points.len() as f64;
+    // The axis is the area centroid of the profile's hull, not the mean of its vertices, which
+    // leans towards the side seen best.
+    let all: Vec<Point2<f64>> = profile_points.iter().map(|(p, _)| *p).collect();
+    let axis_xy = polygon_centroid(&convex_hull_2d(&all)).unwrap_or_else(|| {
+        all.iter().fold(Point2::origin(), |acc, p| acc + p.coords) / all.len() as f64
+    });
     // Largest radius per sector and slab (0 where nothing was seen).
     let mut radius = vec![vec![0.0f64; slabs]; PROFILE_SECTORS];
     for (p, k) in &profile_points {
         let s = sector_of(p, &axis_xy, PROFILE_SECTORS);
         radius[s][*k] = radius[s][*k].max((p - axis_xy).norm());
+    }
+    let near_slabs = ((PROFILE_NEAR_M - PROFILE_FIRST_M) / PROFILE_SLAB_M).round() as usize + 1;
+    let near = radius
+        .iter()
+        .filter(|by_slab| by_slab.iter().take(near_slabs).any(|&r| r > 0.0))
+        .count();
+    if (near as f64) < PROFILE_MIN_NEAR_FRACTION * PROFILE_SECTORS as f64 {
+        return Err(FragilityError::Degenerate(format!(
+            "the rock's base is seen within {PROFILE_NEAR_M} m of its support in only {near} of \
+             {PROFILE_SECTORS} directions: too little to extrapolate the contact (map the base \
+             from lower views)"
+        )));
     }
     let mut contact = Vec::with_capacity(PROFILE_SECTORS);
     for (s, by_slab) in radius.iter().enumerate() {
@@ -240,6 +265,19 @@ fn extrapolated_contact(
         )));
     }
     Ok(hull)
+}
+
+/// The area centroid of a simple polygon; `None` when it has no area.
+fn polygon_centroid(polygon: &[Point2<f64>]) -> Option<Point2<f64>> {
+    let area = polygon_signed_area(polygon);
+    if polygon.len() < 3 || area.abs() <= 0.0 {
+        return None;
+    }
+    let sum = (0..polygon.len()).fold(nalgebra::Vector2::zeros(), |acc, i| {
+        let (a, b) = (polygon[i], polygon[(i + 1) % polygon.len()]);
+        acc + (a.coords + b.coords) * (a.x * b.y - b.x * a.y)
+    });
+    Some(Point2::from(sum / (6.0 * area)))
 }
 
 /// Least-squares line y = a + b·x through `points` (x, y); `None` when the x are all equal.
@@ -667,6 +705,21 @@ mod tests {
             section.alpha_min_deg,
             truth.alpha_min_deg
         );
+    }
+
+    #[test]
+    fn a_base_seen_from_one_side_is_refused() {
+        // Remove the rock's lowest 7 cm on the east half: the wedge is seen from the west only.
+        let (mut scan, _) = wedge_scan();
+        let positions = scan.positions.clone();
+        scan.faces.retain(|f| {
+            let centre = f.iter().fold(nalgebra::Vector3::zeros(), |acc, &v| {
+                acc + positions[v as usize].coords.cast::<f64>()
+            }) / 3.0;
+            !(centre.z > 1.005 && centre.z < 1.07 && centre.x > 0.0)
+        });
+        let error = close_scan(&scan).unwrap_err().to_string();
+        assert!(error.contains("directions"), "{error}");
     }
 
     #[test]
