@@ -149,7 +149,7 @@ pub fn run(args: FragilityArgs) -> anyhow::Result<()> {
     let mut mesh = read_mesh(&args.mesh)?;
     let mut scan_contact = None;
     if args.scan {
-        let closed = close_scan(&mesh)
+        let closed = close_scan(&mesh, &config.scan)
             .with_context(|| format!("closing the scan {}", args.mesh.display()))?;
         tracing::info!(
             contact_m = closed.contact_height_m,

@@ -130,6 +130,8 @@ pub struct FragilityConfig {
     pub pedestal_gap_tolerance_m: f64,
     /// The perturbation study for `alpha_min_spread_deg`.
     pub uncertainty: UncertaintyConfig,
+    /// Closing a scan and extrapolating its contact ([`scan::close_scan`]).
+    pub scan: scan::ScanConfig,
 }
 
 impl Default for FragilityConfig {
@@ -145,6 +147,7 @@ impl Default for FragilityConfig {
             contact_band_m: 0.001,
             pedestal_gap_tolerance_m: 0.01,
             uncertainty: UncertaintyConfig::default(),
+            scan: scan::ScanConfig::default(),
         }
     }
 }
@@ -206,6 +209,7 @@ impl FragilityConfig {
                 "must be even and at least 4",
             ));
         }
+        self.scan.validate()?;
         if self.profile_levels < 8 {
             return Err(invalid(
                 "profile_levels",

@@ -29,18 +29,135 @@ use scarp_slam::TriangleMesh;
 use scarp_slam::geometry::{convex_hull_2d, polygon_signed_area};
 
 use super::topology::weld_key;
+use serde::{Deserialize, Serialize};
+
 use super::{ContactSpec, FragilityAnalysis, FragilityConfig, FragilityError, analyze_detailed};
 
 /// Slab thickness of the extent profile, metres.
 const SLAB_M: f64 = 0.02;
 /// Step between slabs, metres.
 const STEP_M: f64 = 0.01;
-/// The neck must narrow to this fraction of the rock's widest slab (the slabs' hulls include
-/// the rock's overhang above the contact, so a real neck narrows only to about two thirds).
-const NARROWING: f64 = 0.7;
 /// Below the narrowest slab, an extent this many times the narrowest one ends the search (the
 /// pedestal or the ground).
 const WIDENING: f64 = 1.5;
+
+/// Settings of the scan closing and contact extrapolation ([`close_scan`]). Every field has a
+/// documented default; they are the `[scan]` table of a fragility config file.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ScanConfig {
+    /// The neck must narrow to this fraction of the rock's widest slab. Default 0.7: the slabs'
+    /// hulls include the rock's overhang above the contact, so a real neck narrows only to
+    /// about two thirds (rock 1 of the default world: 0.64).
+    pub neck_narrowing: f64,
+    /// The support plane is searched from this far above the neck, metres. Default 0.08.
+    pub support_search_above_m: f64,
+    /// ... down to this far below it, metres. Default 0.3: the rock's underside just above the
+    /// contact is seen in pieces, so the narrowest slab that surrounds its axis can sit well
+    /// above the contact.
+    pub support_search_below_m: f64,
+    /// Upward faces farther than this from the rock's axis are not the support under it,
+    /// metres. Default 1.0.
+    pub support_radius_m: f64,
+    /// The rock is cut this far above the support plane, so that the plane's noisy faces stay
+    /// below the cut, metres. Default 0.01 (one voxel).
+    pub cut_above_support_m: f64,
+    /// Azimuth sectors of the basal profile. Default 36 (10° each).
+    pub profile_sectors: usize,
+    /// Centre of the lowest profile slab above the support plane, metres. Default 0.02: below
+    /// it the TSDF fills the wedge's tip (its surfaces are within the 4 cm truncation band).
+    pub profile_first_m: f64,
+    /// Centre of the highest profile slab, metres. Default 0.15.
+    pub profile_last_m: f64,
+    /// Slabs (the lowest ones measured in a sector) fitted per sector. Default 4.
+    pub profile_fit_slabs: usize,
+    /// A sector counts as seen near the support when its lowest measured slab is centred at
+    /// most this high above the plane, metres. Default 0.05.
+    pub profile_near_m: f64,
+    /// At least this fraction of the sectors must be seen near the support, or the scan is
+    /// refused: a base seen on one side only extrapolates to a contact in the wrong place.
+    /// Default 2/3.
+    pub profile_min_near_fraction: f64,
+}
+
+impl Default for ScanConfig {
+    fn default() -> Self {
+        Self {
+            neck_narrowing: 0.7,
+            support_search_above_m: 0.08,
+            support_search_below_m: 0.3,
+            support_radius_m: 1.0,
+            cut_above_support_m: 0.01,
+            profile_sectors: 36,
+            profile_first_m: 0.02,
+            profile_last_m: 0.15,
+            profile_fit_slabs: 4,
+            profile_near_m: 0.05,
+            profile_min_near_fraction: 2.0 / 3.0,
+        }
+    }
+}
+
+impl ScanConfig {
+    /// Checks every field's range.
+    ///
+    /// # Errors
+    /// [`FragilityError::InvalidConfig`] naming the first field out of range.
+    pub fn validate(&self) -> Result<(), FragilityError> {
+        let bad = |field: &'static str, value: String, reason: &'static str| {
+            Err(FragilityError::InvalidConfig {
+                field,
+                value,
+                reason,
+            })
+        };
+        for (field, v) in [
+            ("scan.support_search_above_m", self.support_search_above_m),
+            ("scan.support_search_below_m", self.support_search_below_m),
+            ("scan.support_radius_m", self.support_radius_m),
+            ("scan.cut_above_support_m", self.cut_above_support_m),
+            ("scan.profile_first_m", self.profile_first_m),
+            ("scan.profile_near_m", self.profile_near_m),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return bad(field, v.to_string(), "must be non-negative and finite");
+            }
+        }
+        for (field, v) in [
+            ("scan.neck_narrowing", self.neck_narrowing),
+            (
+                "scan.profile_min_near_fraction",
+                self.profile_min_near_fraction,
+            ),
+        ] {
+            if !(v.is_finite() && v > 0.0 && v <= 1.0) {
+                return bad(field, v.to_string(), "must be in (0, 1]");
+            }
+        }
+        if !(self.profile_last_m.is_finite() && self.profile_last_m > self.profile_first_m) {
+            return bad(
+                "scan.profile_last_m",
+                self.profile_last_m.to_string(),
+                "must be above profile_first_m",
+            );
+        }
+        if self.profile_sectors < 3 {
+            return bad(
+                "scan.profile_sectors",
+                self.profile_sectors.to_string(),
+                "must be at least 3",
+            );
+        }
+        if self.profile_fit_slabs < 3 {
+            return bad(
+                "scan.profile_fit_slabs",
+                self.profile_fit_slabs.to_string(),
+                "must be at least 3",
+            );
+        }
+        Ok(())
+    }
+}
 
 /// A scan closed above its neck.
 #[derive(Debug, Clone)]
@@ -63,37 +180,12 @@ pub struct ClosedScan {
 /// Upward-facing faces count toward the support plane when their normal is within this cosine
 /// of +z (18°).
 const UP_COS: f64 = 0.95;
-/// The support plane is searched from this far above the neck ...
-const SUPPORT_SEARCH_ABOVE_M: f64 = 0.08;
-/// ... down to this far below it, metres: the rock's underside just above the contact is seen
-/// in pieces, so the narrowest slab that surrounds its axis can sit well above the contact.
-const SUPPORT_SEARCH_BELOW_M: f64 = 0.3;
-/// Upward faces farther than this from the rock's axis are not the support under it, metres.
-const SUPPORT_RADIUS_M: f64 = 1.0;
 /// Height bins of the support-plane search, metres.
 const SUPPORT_BIN_M: f64 = 0.005;
 /// Sectors of [`SECTORS`] an upward ring must fill to be the support (it circles the rock).
 const SUPPORT_MIN_SECTORS: usize = 9;
-/// The rock is cut this far above the support plane, so that the plane's noisy faces stay
-/// below the cut, metres.
-const CUT_ABOVE_SUPPORT_M: f64 = 0.01;
-/// Azimuth sectors of the basal profile.
-const PROFILE_SECTORS: usize = 36;
 /// Thickness of the basal profile's slabs, metres.
 const PROFILE_SLAB_M: f64 = 0.01;
-/// Centre of the lowest profile slab above the support plane, metres: below it the wedge's tip
-/// is filled by the TSDF.
-const PROFILE_FIRST_M: f64 = 0.02;
-/// Centre of the highest profile slab, metres.
-const PROFILE_LAST_M: f64 = 0.15;
-/// Slabs (the lowest ones measured in a sector) fitted per sector.
-const PROFILE_FIT_SLABS: usize = 4;
-/// A sector counts as seen near the support when its lowest measured slab is centred at most
-/// this high above the plane, metres.
-const PROFILE_NEAR_M: f64 = 0.05;
-/// At least this fraction of the sectors must be seen near the support: a base seen on one
-/// side only extrapolates to a contact in the wrong place.
-const PROFILE_MIN_NEAR_FRACTION: f64 = 2.0 / 3.0;
 
 /// Azimuth sectors a slab's vertices must fill (of [`SECTORS`]) to count: a slab seen from
 /// one side only has a small hull that is not a neck.
@@ -139,12 +231,17 @@ fn sector_of(p: &Point2<f64>, axis_xy: &Point2<f64>, sectors: usize) -> usize {
 }
 
 /// The height of the support's top (pedestal or ground) under a scanned rock: the highest level
-/// from [`SUPPORT_SEARCH_ABOVE_M`] above `neck_z` to [`SUPPORT_SEARCH_BELOW_M`] below it where
+/// from `support_search_above_m` above `neck_z` to `support_search_below_m` below it where
 /// upward-facing faces fill at least
 /// [`SUPPORT_MIN_SECTORS`] of [`SECTORS`] sectors around `axis_xy`; the area-weighted mean height
 /// of the faces within a bin of it. `None` when no level qualifies (the support is not seen
 /// all round).
-fn support_plane_height(mesh: &TriangleMesh, axis_xy: &Point2<f64>, neck_z: f64) -> Option<f64> {
+fn support_plane_height(
+    mesh: &TriangleMesh,
+    axis_xy: &Point2<f64>,
+    neck_z: f64,
+    config: &ScanConfig,
+) -> Option<f64> {
     // (height, area, sector) of each upward face near the neck.
     let faces: Vec<(f64, f64, usize)> = mesh
         .faces
@@ -157,15 +254,16 @@ fn support_plane_height(mesh: &TriangleMesh, axis_xy: &Point2<f64>, neck_z: f64)
             let xy = centre.xy();
             (area2 > 0.0
                 && n.z > UP_COS * area2
-                && centre.z <= neck_z + SUPPORT_SEARCH_ABOVE_M
-                && centre.z >= neck_z - SUPPORT_SEARCH_BELOW_M
-                && (xy - axis_xy).norm() <= SUPPORT_RADIUS_M)
+                && centre.z <= neck_z + config.support_search_above_m
+                && centre.z >= neck_z - config.support_search_below_m
+                && (xy - axis_xy).norm() <= config.support_radius_m)
                 .then(|| (centre.z, 0.5 * area2, sector_of(&xy, axis_xy, SECTORS)))
         })
         .collect();
-    let bins = ((SUPPORT_SEARCH_ABOVE_M + SUPPORT_SEARCH_BELOW_M) / SUPPORT_BIN_M).ceil() as usize;
+    let bins = ((config.support_search_above_m + config.support_search_below_m) / SUPPORT_BIN_M)
+        .ceil() as usize;
     let level = (0..bins).find_map(|i| {
-        let z = neck_z + SUPPORT_SEARCH_ABOVE_M - (i as f64 + 0.5) * SUPPORT_BIN_M;
+        let z = neck_z + config.support_search_above_m - (i as f64 + 0.5) * SUPPORT_BIN_M;
         let mut filled = [false; SECTORS];
         for &(fz, _, sector) in &faces {
             if (fz - z).abs() <= 0.5 * SUPPORT_BIN_M {
@@ -183,9 +281,9 @@ fn support_plane_height(mesh: &TriangleMesh, axis_xy: &Point2<f64>, neck_z: f64)
 
 /// The contact polygon of a rock standing on a support plane at `plane_z`, extrapolated from
 /// the basal profile of the rock's scanned surface (`rock_positions`, the part above the plane):
-/// in each of [`PROFILE_SECTORS`] sectors, the largest radius from the axis in each slab from
-/// [`PROFILE_FIRST_M`] to [`PROFILE_LAST_M`] above the plane, fitted over the lowest
-/// [`PROFILE_FIT_SLABS`] slabs measured as r² = a + b·(height of the slab's top) and evaluated
+/// in each of `profile_sectors` sectors, the largest radius from the axis in each slab from
+/// `profile_first_m` to `profile_last_m` above the plane, fitted over the lowest
+/// `profile_fit_slabs` slabs measured as r² = a + b·(height of the slab's top) and evaluated
 /// at the plane (never wider than the lowest slab). Convex hull, counter-clockwise, xy metres.
 ///
 /// # Errors
@@ -193,10 +291,13 @@ fn support_plane_height(mesh: &TriangleMesh, axis_xy: &Point2<f64>, neck_z: f64)
 fn extrapolated_contact(
     rock_positions: &[Point3<f32>],
     plane_z: f64,
+    config: &ScanConfig,
 ) -> Result<Vec<Point2<f64>>, FragilityError> {
-    let slabs = ((PROFILE_LAST_M - PROFILE_FIRST_M) / PROFILE_SLAB_M).round() as usize + 1;
+    let sectors = config.profile_sectors;
+    let slabs =
+        ((config.profile_last_m - config.profile_first_m) / PROFILE_SLAB_M).round() as usize + 1;
     let slab_of = |z: f64| -> Option<usize> {
-        let t = (z - plane_z - PROFILE_FIRST_M) / PROFILE_SLAB_M + 0.5;
+        let t = (z - plane_z - config.profile_first_m) / PROFILE_SLAB_M + 0.5;
         (t >= 0.0 && (t as usize) < slabs).then_some(t as usize)
     };
     let profile_points: Vec<(Point2<f64>, usize)> = rock_positions
@@ -217,32 +318,34 @@ fn extrapolated_contact(
         all.iter().fold(Point2::origin(), |acc, p| acc + p.coords) / all.len() as f64
     });
     // Largest radius per sector and slab (0 where nothing was seen).
-    let mut radius = vec![vec![0.0f64; slabs]; PROFILE_SECTORS];
+    let mut radius = vec![vec![0.0f64; slabs]; sectors];
     for (p, k) in &profile_points {
-        let s = sector_of(p, &axis_xy, PROFILE_SECTORS);
+        let s = sector_of(p, &axis_xy, sectors);
         radius[s][*k] = radius[s][*k].max((p - axis_xy).norm());
     }
-    let near_slabs = ((PROFILE_NEAR_M - PROFILE_FIRST_M) / PROFILE_SLAB_M).round() as usize + 1;
+    let near_slabs =
+        ((config.profile_near_m - config.profile_first_m) / PROFILE_SLAB_M).round() as usize + 1;
     let near = radius
         .iter()
         .filter(|by_slab| by_slab.iter().take(near_slabs).any(|&r| r > 0.0))
         .count();
-    if (near as f64) < PROFILE_MIN_NEAR_FRACTION * PROFILE_SECTORS as f64 {
+    if (near as f64) < config.profile_min_near_fraction * sectors as f64 {
         return Err(FragilityError::Degenerate(format!(
-            "the rock's base is seen within {PROFILE_NEAR_M} m of its support in only {near} of \
-             {PROFILE_SECTORS} directions: too little to extrapolate the contact (map the base \
-             from lower views)"
+            "the rock's base is seen within {} m of its support in only {near} of \
+             {sectors} directions: too little to extrapolate the contact (map the base \
+             from lower views)",
+            config.profile_near_m
         )));
     }
-    let mut contact = Vec::with_capacity(PROFILE_SECTORS);
+    let mut contact = Vec::with_capacity(sectors);
     for (s, by_slab) in radius.iter().enumerate() {
         let measured: Vec<(f64, f64)> = by_slab
             .iter()
             .enumerate()
             .filter(|(_, r)| **r > 0.0)
-            .take(PROFILE_FIT_SLABS)
+            .take(config.profile_fit_slabs)
             .map(|(k, r)| {
-                let top_m = PROFILE_FIRST_M + (k as f64 + 0.5) * PROFILE_SLAB_M;
+                let top_m = config.profile_first_m + (k as f64 + 0.5) * PROFILE_SLAB_M;
                 (top_m, r.powi(2))
             })
             .collect();
@@ -254,13 +357,13 @@ fn extrapolated_contact(
             Some((a, b)) if b > 0.0 => a.max(0.0).sqrt().min(lowest_r),
             _ => lowest_r,
         };
-        let azimuth = (s as f64 + 0.5) / PROFILE_SECTORS as f64 * std::f64::consts::TAU;
+        let azimuth = (s as f64 + 0.5) / sectors as f64 * std::f64::consts::TAU;
         contact.push(axis_xy + r0 * nalgebra::Vector2::new(azimuth.cos(), azimuth.sin()));
     }
     let hull = convex_hull_2d(&contact);
     if hull.len() < 3 || polygon_signed_area(&hull).abs() <= 0.0 {
         return Err(FragilityError::Degenerate(format!(
-            "the basal profile is measured in {} of {PROFILE_SECTORS} sectors: too few for a contact polygon",
+            "the basal profile is measured in {} of {sectors} sectors: too few for a contact polygon",
             contact.len()
         )));
     }
@@ -299,12 +402,15 @@ fn line_fit(points: &[(f64, f64)]) -> Option<(f64, f64)> {
 ///
 /// # Errors
 /// [`FragilityError::Degenerate`] when the extent never narrows below the rock (no neck).
-pub fn find_scan_neck(mesh: &TriangleMesh) -> Result<f64, FragilityError> {
-    find_neck(mesh).map(|(z, _)| z)
+pub fn find_scan_neck(mesh: &TriangleMesh, config: &ScanConfig) -> Result<f64, FragilityError> {
+    find_neck(mesh, config).map(|(z, _)| z)
 }
 
 /// The neck height and the mean (xy) of the scan's vertices there: the rock's axis at its base.
-fn find_neck(mesh: &TriangleMesh) -> Result<(f64, Point2<f64>), FragilityError> {
+fn find_neck(
+    mesh: &TriangleMesh,
+    config: &ScanConfig,
+) -> Result<(f64, Point2<f64>), FragilityError> {
     let (lo, hi) = mesh
         .bounds()
         .ok_or(FragilityError::EmptyMesh { mesh: "scan" })?;
@@ -318,7 +424,7 @@ fn find_neck(mesh: &TriangleMesh) -> Result<(f64, Point2<f64>), FragilityError> 
             match narrowest {
                 None => {
                     widest = widest.max(extent);
-                    if extent < NARROWING * widest {
+                    if extent < config.neck_narrowing * widest {
                         narrowest = Some((z, extent, mean));
                     }
                 }
@@ -494,11 +600,12 @@ fn fan(mesh: &mut TriangleMesh, chain: &[u32]) -> bool {
 /// [`FragilityError::EmptyMesh`] for an empty scan or nothing above the cut;
 /// [`FragilityError::Degenerate`] when no neck is found or the basal profile is too sparse for
 /// a contact polygon.
-pub fn close_scan(mesh: &TriangleMesh) -> Result<ClosedScan, FragilityError> {
-    let (neck_z, axis_xy) = find_neck(mesh)?;
-    let plane_z = support_plane_height(mesh, &axis_xy, neck_z);
+pub fn close_scan(mesh: &TriangleMesh, config: &ScanConfig) -> Result<ClosedScan, FragilityError> {
+    config.validate()?;
+    let (neck_z, axis_xy) = find_neck(mesh, config)?;
+    let plane_z = support_plane_height(mesh, &axis_xy, neck_z, config);
     let contact_height_m = plane_z.unwrap_or(neck_z);
-    let cut_z = plane_z.map_or(neck_z, |z| z + CUT_ABOVE_SUPPORT_M);
+    let cut_z = plane_z.map_or(neck_z, |z| z + config.cut_above_support_m);
     let weld = welded_vertices(mesh);
     let above: Vec<[u32; 3]> = mesh
         .faces
@@ -538,7 +645,7 @@ pub fn close_scan(mesh: &TriangleMesh) -> Result<ClosedScan, FragilityError> {
         rock.faces.push(g);
     }
     // The profile is measured on the scanned surface only, before the fans add vertices.
-    let contact_polygon = extrapolated_contact(&rock.positions, contact_height_m)?
+    let contact_polygon = extrapolated_contact(&rock.positions, contact_height_m, config)?
         .iter()
         .map(|p| [p.x, p.y, contact_height_m])
         .collect();
@@ -562,7 +669,7 @@ pub fn analyze_scan(
     mesh: &TriangleMesh,
     config: &FragilityConfig,
 ) -> Result<(ClosedScan, FragilityAnalysis), FragilityError> {
-    let closed = close_scan(mesh)?;
+    let closed = close_scan(mesh, &config.scan)?;
     let analysis = analyze_detailed(
         &closed.mesh,
         ContactSpec::Polygon(&closed.contact_polygon),
@@ -623,7 +730,7 @@ mod tests {
     fn finds_the_neck_and_closes_the_rock() {
         let scan = open_scan();
         assert!(analyze(&scan, ContactSpec::Auto, &FragilityConfig::default()).is_err());
-        let closed = close_scan(&scan).unwrap();
+        let closed = close_scan(&scan, &ScanConfig::default()).unwrap();
         assert!(
             (0.9..=1.03).contains(&closed.contact_height_m),
             "neck at {}",
@@ -718,7 +825,9 @@ mod tests {
             }) / 3.0;
             !(centre.z > 1.005 && centre.z < 1.07 && centre.x > 0.0)
         });
-        let error = close_scan(&scan).unwrap_err().to_string();
+        let error = close_scan(&scan, &ScanConfig::default())
+            .unwrap_err()
+            .to_string();
         assert!(error.contains("directions"), "{error}");
     }
 
@@ -726,6 +835,6 @@ mod tests {
     fn a_scan_without_a_neck_is_refused() {
         let mut cube = TriangleMesh::cuboid(Point3::new(0.0, 0.0, 0.0), Point3::new(1.0, 1.0, 1.0));
         cube.faces.truncate(10);
-        assert!(close_scan(&cube).is_err());
+        assert!(close_scan(&cube, &ScanConfig::default()).is_err());
     }
 }
