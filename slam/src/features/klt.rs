@@ -143,22 +143,46 @@ fn smoothed(image: &GrayImage) -> GrayImage {
     let (w, h) = (image.width() as usize, image.height() as usize);
     let src = image.as_slice();
     let mut rows = vec![0.0f32; w * h];
-    for v in 0..h {
-        let r = &src[v * w..(v + 1) * w];
-        for u in 0..w {
-            let (l, c, rt) = (r[u.saturating_sub(1)], r[u], r[(u + 1).min(w - 1)]);
-            rows[v * w + u] = 0.25 * (l + rt) + 0.5 * c;
-        }
+    for (r, out) in src.chunks_exact(w).zip(rows.chunks_exact_mut(w)) {
+        smooth_row(r, out);
     }
     let mut out = vec![0.0f32; w * h];
-    for v in 0..h {
+    for (v, dst) in out.chunks_exact_mut(w).enumerate() {
         let (up, down) = (v.saturating_sub(1), (v + 1).min(h - 1));
-        for u in 0..w {
-            out[v * w + u] = 0.25 * (rows[up * w + u] + rows[down * w + u]) + 0.5 * rows[v * w + u];
+        let (a, c, b) = (
+            &rows[up * w..][..w],
+            &rows[v * w..][..w],
+            &rows[down * w..][..w],
+        );
+        for (((o, a), b), c) in dst.iter_mut().zip(a).zip(b).zip(c) {
+            *o = 0.25 * (a + b) + 0.5 * c;
         }
     }
     // Same size as the input, so the length is w·h.
     GrayImage::from_vec(image.width(), image.height(), out).expect("w·h pixels")
+}
+
+/// One row of [`smoothed`]'s horizontal pass: `out[u] = (r[u−1] + r[u+1])/4 + r[u]/2`, edges
+/// replicated. `r` and `out` have the same, non-zero length.
+fn smooth_row(r: &[f32], out: &mut [f32]) {
+    let w = r.len().min(out.len());
+    if w < 3 {
+        for u in 0..w {
+            let (l, c, rt) = (r[u.saturating_sub(1)], r[u], r[(u + 1).min(w - 1)]);
+            out[u] = 0.25 * (l + rt) + 0.5 * c;
+        }
+        return;
+    }
+    out[0] = 0.25 * (r[0] + r[1]) + 0.5 * r[0];
+    for (((o, l), c), rt) in out[1..w - 1]
+        .iter_mut()
+        .zip(&r[..w - 2])
+        .zip(&r[1..w - 1])
+        .zip(&r[2..])
+    {
+        *o = 0.25 * (l + rt) + 0.5 * c;
+    }
+    out[w - 1] = 0.25 * (r[w - 2] + r[w - 1]) + 0.5 * r[w - 1];
 }
 
 /// The outcome of tracking one point.
@@ -250,14 +274,24 @@ pub fn track_points_warped(
     Ok(points
         .par_iter()
         .map(|&p| {
-            let forward = track_one(prev, next, p, &linear, levels, config);
+            // One set of buffers per point, reused by every level of both directions.
+            let mut scratch = Scratch::default();
+            let forward = track_one(prev, next, p, &linear, levels, config, &mut scratch);
             if forward.status != KltStatus::Tracked {
                 return forward;
             }
             let Some(max_fb) = config.max_forward_backward_px else {
                 return forward;
             };
-            let back = track_one(next, prev, forward.position, &inverse, levels, config);
+            let back = track_one(
+                next,
+                prev,
+                forward.position,
+                &inverse,
+                levels,
+                config,
+                &mut scratch,
+            );
             let fb = if back.status == KltStatus::Tracked {
                 (back.position - p).norm()
             } else {
@@ -290,6 +324,180 @@ fn inside(image: &GrayImage, p: Point2<f32>) -> bool {
         && p.y < (image.height() as f32 - 1.0)
 }
 
+/// Working buffers of one point's tracking, allocated once per point and reused by every
+/// level, iteration and the backward pass (no allocation inside the Gauss–Newton loop).
+///
+/// The template of the current level is kept as separate arrays of intensity and gradients
+/// (row-major over the window), so the per-iteration sums run over contiguous slices. A
+/// template sample that could not be taken (window partly outside the image) has `valid`
+/// false and zero intensity and gradients, so it adds nothing to the Gauss–Newton sums.
+#[derive(Debug, Default)]
+struct Scratch {
+    /// Template intensities.
+    t: Vec<f32>,
+    /// Template x gradients (central differences).
+    gx: Vec<f32>,
+    /// Template y gradients (central differences).
+    gy: Vec<f32>,
+    /// Whether each template sample exists.
+    valid: Vec<bool>,
+    /// Whether every template sample exists (the window and its frame are inside the image).
+    complete: bool,
+    /// Bilinear samples of a window (template with its frame, or the next image's window).
+    patch: Vec<f32>,
+}
+
+impl Scratch {
+    /// Samples the template window of half-size `half` around `p` in `image`, with its
+    /// gradients. Returns the number of valid samples and the normal-matrix entries
+    /// `(Σ gx², Σ gx·gy, Σ gy²)`.
+    fn build_template(
+        &mut self,
+        image: &GrayImage,
+        p: Point2<f32>,
+        half: i32,
+    ) -> (usize, [f32; 3]) {
+        let side = (2 * half + 1) as usize;
+        let n = side * side;
+        self.t.clear();
+        self.gx.clear();
+        self.gy.clear();
+        self.valid.clear();
+        if sample_window(image, p.x, p.y, half + 1, &mut self.patch) {
+            // Fast path: the window and its one-pixel frame are inside the image. Central
+            // differences of the bilinear patch equal bilinear samples of central differences.
+            let stride = side + 2;
+            for j in 0..side {
+                let up = &self.patch[j * stride..][..stride];
+                let row = &self.patch[(j + 1) * stride..][..stride];
+                let down = &self.patch[(j + 2) * stride..][..stride];
+                self.t.extend_from_slice(&row[1..=side]);
+                self.gx.extend(
+                    row[2..]
+                        .iter()
+                        .zip(&row[..side])
+                        .map(|(r, l)| 0.5 * (r - l)),
+                );
+                self.gy.extend(
+                    down[1..=side]
+                        .iter()
+                        .zip(&up[1..=side])
+                        .map(|(d, u)| 0.5 * (d - u)),
+                );
+            }
+            self.valid.resize(n, true);
+            self.complete = true;
+        } else {
+            for j in -half..=half {
+                for i in -half..=half {
+                    let (x, y) = (p.x + i as f32, p.y + j as f32);
+                    let s = (|| {
+                        let t = image.sample_bilinear(x, y)?;
+                        let gx = 0.5
+                            * (image.sample_bilinear(x + 1.0, y)?
+                                - image.sample_bilinear(x - 1.0, y)?);
+                        let gy = 0.5
+                            * (image.sample_bilinear(x, y + 1.0)?
+                                - image.sample_bilinear(x, y - 1.0)?);
+                        Some((t, gx, gy))
+                    })();
+                    let (t, gx, gy) = s.unwrap_or((0.0, 0.0, 0.0));
+                    self.t.push(t);
+                    self.gx.push(gx);
+                    self.gy.push(gy);
+                    self.valid.push(s.is_some());
+                }
+            }
+            self.complete = false;
+        }
+        let valid = if self.complete {
+            n
+        } else {
+            self.valid.iter().filter(|&&v| v).count()
+        };
+        let normal = [
+            lane_dot(&self.gx, &self.gx),
+            lane_dot(&self.gx, &self.gy),
+            lane_dot(&self.gy, &self.gy),
+        ];
+        (valid, normal)
+    }
+}
+
+/// Number of independent accumulators in the window sums (lets the compiler use SIMD lanes;
+/// the summation order is fixed, so results do not depend on the machine's thread count).
+const LANES: usize = 8;
+
+/// `Σ a·b` over two equally long slices, accumulated in [`LANES`] fixed lanes.
+fn lane_dot(a: &[f32], b: &[f32]) -> f32 {
+    let mut acc = [0.0f32; LANES];
+    let (ac, bc) = (a.chunks_exact(LANES), b.chunks_exact(LANES));
+    let (ar, br) = (ac.remainder(), bc.remainder());
+    for (x, y) in ac.zip(bc) {
+        for l in 0..LANES {
+            acc[l] += x[l] * y[l];
+        }
+    }
+    for (l, (x, y)) in ar.iter().zip(br).enumerate() {
+        acc[l] += x * y;
+    }
+    acc.iter().sum()
+}
+
+/// The Gauss–Newton right-hand side `(Σ gx·e, Σ gy·e)` with `e = j − t`, over equally long
+/// slices, in [`LANES`] fixed lanes.
+fn gradient_error_sums(j: &[f32], t: &[f32], gx: &[f32], gy: &[f32]) -> (f32, f32) {
+    let (mut ax, mut ay) = ([0.0f32; LANES], [0.0f32; LANES]);
+    let (jc, tc, xc, yc) = (
+        j.chunks_exact(LANES),
+        t.chunks_exact(LANES),
+        gx.chunks_exact(LANES),
+        gy.chunks_exact(LANES),
+    );
+    let rest = (
+        jc.remainder(),
+        tc.remainder(),
+        xc.remainder(),
+        yc.remainder(),
+    );
+    for (((jv, tv), xv), yv) in jc.zip(tc).zip(xc).zip(yc) {
+        for l in 0..LANES {
+            let e = jv[l] - tv[l];
+            ax[l] += xv[l] * e;
+            ay[l] += yv[l] * e;
+        }
+    }
+    for (l, (((jv, tv), xv), yv)) in rest
+        .0
+        .iter()
+        .zip(rest.1)
+        .zip(rest.2)
+        .zip(rest.3)
+        .enumerate()
+    {
+        let e = jv - tv;
+        ax[l] += xv * e;
+        ay[l] += yv * e;
+    }
+    (ax.iter().sum(), ay.iter().sum())
+}
+
+/// `Σ |a − b|` over two equally long slices, in [`LANES`] fixed lanes.
+fn abs_difference_sum(a: &[f32], b: &[f32]) -> f32 {
+    let mut acc = [0.0f32; LANES];
+    let (ac, bc) = (a.chunks_exact(LANES), b.chunks_exact(LANES));
+    let (ar, br) = (ac.remainder(), bc.remainder());
+    for (x, y) in ac.zip(bc) {
+        for l in 0..LANES {
+            acc[l] += (x[l] - y[l]).abs();
+        }
+    }
+    for (l, (x, y)) in ar.iter().zip(br).enumerate() {
+        acc[l] += (x - y).abs();
+    }
+    acc.iter().sum()
+}
+
 /// Tracks one point coarse to fine.
 fn track_one(
     prev: &KltPyramid,
@@ -298,6 +506,7 @@ fn track_one(
     linear: &Matrix2<f32>,
     levels: usize,
     config: &KltConfig,
+    scratch: &mut Scratch,
 ) -> KltTrack {
     let failed = |status| KltTrack {
         position: p0,
@@ -313,7 +522,7 @@ fn track_one(
     for level in (0..levels).rev() {
         let (t_img, j_img) = (&prev.levels[level], &next.levels[level]);
         let p = to_level(p0, level);
-        match refine_level(t_img, j_img, p, d, linear, half, config) {
+        match refine_level(t_img, j_img, p, d, linear, half, config, scratch) {
             LevelResult::Refined(new_d) => d = new_d,
             // Coarse levels may lack room or texture; the finer levels decide.
             LevelResult::TooFewSamples if level > 0 => {}
@@ -333,7 +542,14 @@ fn track_one(
             ..failed(KltStatus::OutOfImage)
         };
     }
-    let residual = mean_residual(&prev.levels[0], j0, p0, q, linear, half);
+    // The scratch holds the level-0 template at `p0` (level 0 was refined last).
+    let unwarped = *linear == Matrix2::identity();
+    let residual =
+        if unwarped && scratch.complete && sample_window(j0, q.x, q.y, half, &mut scratch.patch) {
+            abs_difference_sum(&scratch.patch, &scratch.t) / scratch.t.len() as f32
+        } else {
+            mean_residual(&prev.levels[0], j0, p0, q, linear, half)
+        };
     let status = if residual <= config.max_mean_residual {
         KltStatus::Tracked
     } else {
@@ -353,7 +569,10 @@ enum LevelResult {
     Untextured,
 }
 
-/// Gauss–Newton on the displacement `d` of the window around `p` (level coordinates).
+/// Gauss–Newton on the displacement `d` of the window around `p` (level coordinates). The
+/// template and its normal matrix are computed once (inverse-compositional for translation);
+/// each iteration samples the next image's window once.
+#[allow(clippy::too_many_arguments)]
 fn refine_level(
     t_img: &GrayImage,
     j_img: &GrayImage,
@@ -362,49 +581,10 @@ fn refine_level(
     linear: &Matrix2<f32>,
     half: i32,
     config: &KltConfig,
+    scratch: &mut Scratch,
 ) -> LevelResult {
     let side = (2 * half + 1) as usize;
-    // Template samples and gradients; `None` where the window leaves the image.
-    let mut template: Vec<Option<(f32, f32, f32)>> = Vec::with_capacity(side * side);
-    let (mut gxx, mut gxy, mut gyy) = (0.0f32, 0.0f32, 0.0f32);
-    let mut patch = Vec::new();
-    if sample_window(t_img, p.x, p.y, half + 1, &mut patch) {
-        // Fast path: the window and its one-pixel frame are inside the image. Central
-        // differences of the bilinear patch equal bilinear samples of central differences.
-        let stride = side + 2;
-        for j in 0..side {
-            for i in 0..side {
-                let c = (j + 1) * stride + i + 1;
-                let gx = 0.5 * (patch[c + 1] - patch[c - 1]);
-                let gy = 0.5 * (patch[c + stride] - patch[c - stride]);
-                gxx += gx * gx;
-                gxy += gx * gy;
-                gyy += gy * gy;
-                template.push(Some((patch[c], gx, gy)));
-            }
-        }
-    }
-    let slow_template = template.is_empty();
-    for j in (-half..=half).filter(|_| slow_template) {
-        for i in -half..=half {
-            let (x, y) = (p.x + i as f32, p.y + j as f32);
-            let s = (|| {
-                let t = t_img.sample_bilinear(x, y)?;
-                let gx = 0.5
-                    * (t_img.sample_bilinear(x + 1.0, y)? - t_img.sample_bilinear(x - 1.0, y)?);
-                let gy = 0.5
-                    * (t_img.sample_bilinear(x, y + 1.0)? - t_img.sample_bilinear(x, y - 1.0)?);
-                Some((t, gx, gy))
-            })();
-            if let Some((_, gx, gy)) = s {
-                gxx += gx * gx;
-                gxy += gx * gy;
-                gyy += gy * gy;
-            }
-            template.push(s);
-        }
-    }
-    let valid = template.iter().filter(|s| s.is_some()).count();
+    let (valid, [gxx, gxy, gyy]) = scratch.build_template(t_img, p, half);
     if valid * 2 < side * side {
         return LevelResult::TooFewSamples;
     }
@@ -415,33 +595,36 @@ fn refine_level(
     }
     let inv = [gyy / det, -gxy / det, gxx / det];
     let unwarped = *linear == Matrix2::identity();
-    let mut next_patch = Vec::new();
+    let Scratch {
+        t,
+        gx,
+        gy,
+        valid: sample_valid,
+        patch,
+        ..
+    } = scratch;
     for _ in 0..config.max_iterations {
-        let (mut bx, mut by) = (0.0f32, 0.0f32);
-        let fast = unwarped && sample_window(j_img, p.x + d.x, p.y + d.y, half, &mut next_patch);
-        if fast {
-            for (s, &jv) in template.iter().zip(&next_patch) {
-                if let Some((t, gx, gy)) = *s {
-                    let e = jv - t;
-                    bx += gx * e;
-                    by += gy * e;
+        let fast = unwarped && sample_window(j_img, p.x + d.x, p.y + d.y, half, patch);
+        let (bx, by) = if fast {
+            gradient_error_sums(patch, t, gx, gy)
+        } else {
+            let (mut bx, mut by) = (0.0f32, 0.0f32);
+            let mut k = 0;
+            for j in -half..=half {
+                for i in -half..=half {
+                    let o = linear * Vector2::new(i as f32, j as f32);
+                    if sample_valid[k]
+                        && let Some(jv) = j_img.sample_bilinear(p.x + d.x + o.x, p.y + d.y + o.y)
+                    {
+                        let e = jv - t[k];
+                        bx += gx[k] * e;
+                        by += gy[k] * e;
+                    }
+                    k += 1;
                 }
             }
-        }
-        let mut k = 0;
-        for j in (-half..=half).filter(|_| !fast) {
-            for i in -half..=half {
-                let o = linear * Vector2::new(i as f32, j as f32);
-                if let Some((t, gx, gy)) = template[k]
-                    && let Some(jv) = j_img.sample_bilinear(p.x + d.x + o.x, p.y + d.y + o.y)
-                {
-                    let e = jv - t;
-                    bx += gx * e;
-                    by += gy * e;
-                }
-                k += 1;
-            }
-        }
+            (bx, by)
+        };
         let step = Vector2::new(inv[0] * bx + inv[1] * by, inv[1] * bx + inv[2] * by);
         d -= step;
         if !(d.x.is_finite() && d.y.is_finite()) {
@@ -476,20 +659,29 @@ fn sample_window(image: &GrayImage, x: f32, y: f32, r: i32, out: &mut Vec<f32>) 
         fx * fy,
     );
     let data = image.as_slice();
-    let stride = w as usize;
+    let (stride, side) = (w as usize, side as usize);
+    let (x0, y0) = (x0 as usize, y0 as usize);
     out.clear();
-    for j in 0..side as usize {
-        let top = &data[(y0 as usize + j) * stride + x0 as usize..][..side as usize + 1];
-        let bottom = &data[(y0 as usize + j + 1) * stride + x0 as usize..][..side as usize + 1];
-        for i in 0..side as usize {
-            out.push(w00 * top[i] + w10 * top[i + 1] + w01 * bottom[i] + w11 * bottom[i + 1]);
+    out.resize(side * side, 0.0);
+    for (j, row) in out.chunks_exact_mut(side).enumerate() {
+        let top = &data[(y0 + j) * stride + x0..][..side + 1];
+        let bottom = &data[(y0 + j + 1) * stride + x0..][..side + 1];
+        for ((((o, a), b), c), e) in row
+            .iter_mut()
+            .zip(&top[..side])
+            .zip(&top[1..])
+            .zip(&bottom[..side])
+            .zip(&bottom[1..])
+        {
+            *o = w00 * a + w10 * b + w01 * c + w11 * e;
         }
     }
     true
 }
 
 /// Mean absolute difference between the window at `p` in `t_img` and at `q` in `j_img`, over
-/// the samples both images define; infinite when none.
+/// the samples both images define; infinite when none. (The general case: windows at the
+/// image border or deformed by `linear`.)
 fn mean_residual(
     t_img: &GrayImage,
     j_img: &GrayImage,

@@ -6,7 +6,7 @@ use nalgebra::{Matrix2, Point2};
 use serde::{Deserialize, Serialize};
 
 use super::{
-    FeatureError, KltConfig, KltPyramid, KltStatus, SimilarityFit, SimilarityFitConfig,
+    FeatureError, KltConfig, KltPyramid, KltStatus, KltTrack, SimilarityFit, SimilarityFitConfig,
     fit_similarity_robust, track_points_warped,
 };
 
@@ -46,9 +46,27 @@ fn tracked_pairs(
     klt: &KltConfig,
 ) -> Result<PointPairs, FeatureError> {
     let tracks = track_points_warped(prev, next, points, linear, klt)?;
+    pairs_of_tracks(points, &tracks)
+}
+
+/// The pairs (source, destination) of the points whose track succeeded.
+///
+/// # Errors
+/// [`FeatureError::SizeMismatch`] when `points` and `tracks` differ in length.
+fn pairs_of_tracks(
+    points: &[Point2<f32>],
+    tracks: &[KltTrack],
+) -> Result<PointPairs, FeatureError> {
+    if points.len() != tracks.len() {
+        return Err(FeatureError::SizeMismatch {
+            what: "points and their tracks",
+            left: points.len(),
+            right: tracks.len(),
+        });
+    }
     Ok(points
         .iter()
-        .zip(&tracks)
+        .zip(tracks)
         .filter(|(_, t)| t.status == KltStatus::Tracked)
         .map(|(p, t)| {
             (
@@ -71,7 +89,26 @@ pub fn track_similarity(
     points: &[Point2<f32>],
     config: &MotionConfig,
 ) -> Result<SimilarityFit, FeatureError> {
-    let (src, dst) = tracked_pairs(points, prev, next, &Matrix2::identity(), &config.klt)?;
+    let tracks = track_points_warped(prev, next, points, &Matrix2::identity(), &config.klt)?;
+    similarity_from_tracks(prev, next, points, &tracks, config)
+}
+
+/// As [`track_similarity`], given the first (unwarped) pass already made: `tracks` are
+/// [`track_points`](super::track_points)`(prev, next, points, &config.klt)`. This lets a caller
+/// track the points of many point sets in one parallel call and fit each set separately; the
+/// result is the same as [`track_similarity`]'s.
+///
+/// # Errors
+/// As [`track_similarity`]; [`FeatureError::SizeMismatch`] when `tracks` and `points` differ in
+/// length.
+pub fn similarity_from_tracks(
+    prev: &KltPyramid,
+    next: &KltPyramid,
+    points: &[Point2<f32>],
+    tracks: &[KltTrack],
+    config: &MotionConfig,
+) -> Result<SimilarityFit, FeatureError> {
+    let (src, dst) = pairs_of_tracks(points, tracks)?;
     let mut fit = fit_similarity_robust(&src, &dst, &config.fit)?;
     for _ in 0..config.refinement_passes {
         let t = fit.transform;
