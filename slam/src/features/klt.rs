@@ -388,24 +388,26 @@ impl Scratch {
             self.valid.resize(n, true);
             self.complete = true;
         } else {
-            for j in -half..=half {
-                for i in -half..=half {
-                    let (x, y) = (p.x + i as f32, p.y + j as f32);
-                    let s = (|| {
-                        let t = image.sample_bilinear(x, y)?;
-                        let gx = 0.5
-                            * (image.sample_bilinear(x + 1.0, y)?
-                                - image.sample_bilinear(x - 1.0, y)?);
-                        let gy = 0.5
-                            * (image.sample_bilinear(x, y + 1.0)?
-                                - image.sample_bilinear(x, y - 1.0)?);
-                        Some((t, gx, gy))
-                    })();
-                    let (t, gx, gy) = s.unwrap_or((0.0, 0.0, 0.0));
+            // Near the border: undefined samples are NaN, and so is every difference that
+            // uses one, which marks the template samples that cannot be taken.
+            sample_window_or_nan(image, p.x, p.y, half + 1, &mut self.patch);
+            let stride = side + 2;
+            for j in 0..side {
+                let up = &self.patch[j * stride..][..stride];
+                let row = &self.patch[(j + 1) * stride..][..stride];
+                let down = &self.patch[(j + 2) * stride..][..stride];
+                for i in 1..=side {
+                    let (t, gx, gy) = (
+                        row[i],
+                        0.5 * (row[i + 1] - row[i - 1]),
+                        0.5 * (down[i] - up[i]),
+                    );
+                    let ok = !(t.is_nan() || gx.is_nan() || gy.is_nan());
+                    let (t, gx, gy) = if ok { (t, gx, gy) } else { (0.0, 0.0, 0.0) };
                     self.t.push(t);
                     self.gx.push(gx);
                     self.gy.push(gy);
-                    self.valid.push(s.is_some());
+                    self.valid.push(ok);
                 }
             }
             self.complete = false;
@@ -478,6 +480,18 @@ fn gradient_error_sums(j: &[f32], t: &[f32], gx: &[f32], gy: &[f32]) -> (f32, f3
         let e = jv - tv;
         ax[l] += xv * e;
         ay[l] += yv * e;
+    }
+    (ax.iter().sum(), ay.iter().sum())
+}
+
+/// As [`gradient_error_sums`], skipping the entries where `j` is NaN (not sampled).
+fn masked_gradient_error_sums(j: &[f32], t: &[f32], gx: &[f32], gy: &[f32]) -> (f32, f32) {
+    let (mut ax, mut ay) = ([0.0f32; LANES], [0.0f32; LANES]);
+    for (k, (((jv, tv), xv), yv)) in j.iter().zip(t).zip(gx).zip(gy).enumerate() {
+        let e = jv - tv;
+        let e = if e.is_nan() { 0.0 } else { e };
+        ax[k % LANES] += xv * e;
+        ay[k % LANES] += yv * e;
     }
     (ax.iter().sum(), ay.iter().sum())
 }
@@ -604,9 +618,13 @@ fn refine_level(
         ..
     } = scratch;
     for _ in 0..config.max_iterations {
-        let fast = unwarped && sample_window(j_img, p.x + d.x, p.y + d.y, half, patch);
-        let (bx, by) = if fast {
+        let (x, y) = (p.x + d.x, p.y + d.y);
+        let (bx, by) = if unwarped && sample_window(j_img, x, y, half, patch) {
             gradient_error_sums(patch, t, gx, gy)
+        } else if unwarped {
+            // The window reaches past the border: skip the samples the image does not define.
+            sample_window_or_nan(j_img, x, y, half, patch);
+            masked_gradient_error_sums(patch, t, gx, gy)
         } else {
             let (mut bx, mut by) = (0.0f32, 0.0f32);
             let mut k = 0;
@@ -641,10 +659,11 @@ fn refine_level(
 /// `false` (and `out` unspecified) unless the whole window lies where bilinear sampling is
 /// defined. All samples share one fractional offset, so the weights are computed once.
 fn sample_window(image: &GrayImage, x: f32, y: f32, r: i32, out: &mut Vec<f32>) -> bool {
-    if !(x.is_finite() && y.is_finite()) {
+    // Far-off (or non-finite) positions are outside; the bound keeps the integer maths exact.
+    if !(x.abs() < FAR_PX && y.abs() < FAR_PX) {
         return false;
     }
-    let (xf, yf) = (x.floor(), y.floor());
+    let (xf, yf) = (floor(x), floor(y));
     let (fx, fy) = (x - xf, y - yf);
     let (x0, y0) = (xf as i64 - i64::from(r), yf as i64 - i64::from(r));
     let side = 2 * i64::from(r) + 1;
@@ -677,6 +696,65 @@ fn sample_window(image: &GrayImage, x: f32, y: f32, r: i32, out: &mut Vec<f32>) 
         }
     }
     true
+}
+
+/// As [`sample_window`] for a window that may reach past the image: the samples where
+/// bilinear sampling is not defined are NaN (all of them when `(x, y)` is not finite or far
+/// off).
+fn sample_window_or_nan(image: &GrayImage, x: f32, y: f32, r: i32, out: &mut Vec<f32>) {
+    let side = 2 * i64::from(r) + 1;
+    out.clear();
+    out.resize((side * side) as usize, f32::NAN);
+    if !(x.abs() < FAR_PX && y.abs() < FAR_PX) {
+        return;
+    }
+    let (xf, yf) = (floor(x), floor(y));
+    let (fx, fy) = (x - xf, y - yf);
+    let (x0, y0) = (xf as i64 - i64::from(r), yf as i64 - i64::from(r));
+    let (w, h) = (i64::from(image.width()), i64::from(image.height()));
+    // Window column c samples between image columns x0 + c and x0 + c + 1, which must both
+    // exist (the same for rows).
+    let (c_lo, c_hi) = ((-x0).clamp(0, side), (w - 1 - x0).clamp(0, side));
+    let (r_lo, r_hi) = ((-y0).clamp(0, side), (h - 1 - y0).clamp(0, side));
+    if c_lo >= c_hi || r_lo >= r_hi {
+        return;
+    }
+    let (w00, w10, w01, w11) = (
+        (1.0 - fx) * (1.0 - fy),
+        fx * (1.0 - fy),
+        (1.0 - fx) * fy,
+        fx * fy,
+    );
+    let data = image.as_slice();
+    let (stride, side) = (w as usize, side as usize);
+    let (c_lo, c_hi) = (c_lo as usize, c_hi as usize);
+    let n = c_hi - c_lo;
+    // Columns c_lo..c_hi and rows r_lo..r_hi map to image pixels ≥ 0 by construction.
+    let u = (x0 + c_lo as i64) as usize;
+    for j in r_lo as usize..r_hi as usize {
+        let v = (y0 + j as i64) as usize;
+        let top = &data[v * stride + u..][..n + 1];
+        let bottom = &data[(v + 1) * stride + u..][..n + 1];
+        for ((((o, a), b), c), e) in out[j * side + c_lo..j * side + c_hi]
+            .iter_mut()
+            .zip(&top[..n])
+            .zip(&top[1..])
+            .zip(&bottom[..n])
+            .zip(&bottom[1..])
+        {
+            *o = w00 * a + w10 * b + w01 * c + w11 * e;
+        }
+    }
+}
+
+/// Window positions at least this far from the origin, px, are outside any image.
+const FAR_PX: f32 = 1e9;
+
+/// `x.floor()` for window positions (|x| < [`FAR_PX`]), without a libm call (the baseline
+/// x86-64 target has no rounding instruction).
+fn floor(x: f32) -> f32 {
+    let t = x as i64 as f32;
+    if t > x { t - 1.0 } else { t }
 }
 
 /// Mean absolute difference between the window at `p` in `t_img` and at `q` in `j_img`, over
@@ -752,6 +830,64 @@ mod tests {
             assert!((t.position.x - p.x - dx).abs() < 0.02, "{t:?}");
             assert!((t.position.y - p.y - dy).abs() < 0.02, "{t:?}");
             assert!(t.forward_backward_px < 0.05);
+        }
+    }
+
+    #[test]
+    fn border_windows_match_per_sample_bilinear() {
+        let img = image(40, 30, texture);
+        let mut out = Vec::new();
+        let centres = [
+            (1.3f32, 2.7f32),
+            (38.2, 28.9),
+            (-3.5, 10.25),
+            (20.0, 15.0),
+            (39.5, -0.5),
+            (f32::NAN, 3.0),
+        ];
+        for &(x, y) in &centres {
+            sample_window_or_nan(&img, x, y, 4, &mut out);
+            assert_eq!(out.len(), 81);
+            let mut k = 0;
+            for j in -4..=4 {
+                for i in -4..=4 {
+                    match img.sample_bilinear(x + i as f32, y + j as f32) {
+                        Some(v) => assert!((out[k] - v).abs() < 1e-5, "{x},{y} {i},{j}"),
+                        None => assert!(out[k].is_nan(), "{x},{y} {i},{j}: {}", out[k]),
+                    }
+                    k += 1;
+                }
+            }
+        }
+        assert!(!sample_window(&img, 2.0, 15.0, 4, &mut out));
+        assert!(sample_window(&img, 20.0, 15.0, 4, &mut out));
+        assert_eq!(floor(-1.5), -2.0);
+        assert_eq!(floor(-2.0), -2.0);
+        assert_eq!(floor(2.75), 2.0);
+    }
+
+    #[test]
+    fn points_whose_windows_cross_the_border_still_track() {
+        let (dx, dy) = (1.6f32, -0.7f32);
+        let prev = image(160, 120, texture);
+        let next = image(160, 120, |x, y| texture(x - dx, y - dy));
+        // 25 px windows reach past the left, top and right edges at every level.
+        let points = vec![
+            Point2::new(6.0, 60.0),
+            Point2::new(80.0, 5.0),
+            Point2::new(150.0, 70.0),
+        ];
+        let tracks = track_points(
+            &KltPyramid::new(&prev, 3),
+            &KltPyramid::new(&next, 3),
+            &points,
+            &KltConfig::default(),
+        )
+        .unwrap();
+        for (t, p) in tracks.iter().zip(&points) {
+            assert_eq!(t.status, KltStatus::Tracked, "{p:?}: {t:?}");
+            assert!((t.position.x - p.x - dx).abs() < 0.05, "{p:?}: {t:?}");
+            assert!((t.position.y - p.y - dy).abs() < 0.05, "{p:?}: {t:?}");
         }
     }
 
