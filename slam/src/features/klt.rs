@@ -496,6 +496,22 @@ fn masked_gradient_error_sums(j: &[f32], t: &[f32], gx: &[f32], gy: &[f32]) -> (
     (ax.iter().sum(), ay.iter().sum())
 }
 
+/// The mean of `|j − t|` over the entries where `j` is not NaN; infinite when there are none.
+fn masked_mean_abs_difference(j: &[f32], t: &[f32]) -> f32 {
+    let (mut sum, mut count) = (0.0f32, 0u32);
+    for (jv, tv) in j.iter().zip(t) {
+        if !jv.is_nan() {
+            sum += (jv - tv).abs();
+            count += 1;
+        }
+    }
+    if count == 0 {
+        f32::INFINITY
+    } else {
+        sum / count as f32
+    }
+}
+
 /// `Σ |a − b|` over two equally long slices, in [`LANES`] fixed lanes.
 fn abs_difference_sum(a: &[f32], b: &[f32]) -> f32 {
     let mut acc = [0.0f32; LANES];
@@ -558,12 +574,14 @@ fn track_one(
     }
     // The scratch holds the level-0 template at `p0` (level 0 was refined last).
     let unwarped = *linear == Matrix2::identity();
-    let residual =
-        if unwarped && scratch.complete && sample_window(j0, q.x, q.y, half, &mut scratch.patch) {
-            abs_difference_sum(&scratch.patch, &scratch.t) / scratch.t.len() as f32
-        } else {
-            mean_residual(&prev.levels[0], j0, p0, q, linear, half)
-        };
+    let residual = if !scratch.complete {
+        mean_residual(&prev.levels[0], j0, p0, q, linear, half)
+    } else if unwarped && sample_window(j0, q.x, q.y, half, &mut scratch.patch) {
+        abs_difference_sum(&scratch.patch, &scratch.t) / scratch.t.len() as f32
+    } else {
+        sample_window_warped(j0, q.x, q.y, linear, half, &mut scratch.patch);
+        masked_mean_abs_difference(&scratch.patch, &scratch.t)
+    };
     let status = if residual <= config.max_mean_residual {
         KltStatus::Tracked
     } else {
@@ -610,38 +628,21 @@ fn refine_level(
     let inv = [gyy / det, -gxy / det, gxx / det];
     let unwarped = *linear == Matrix2::identity();
     let Scratch {
-        t,
-        gx,
-        gy,
-        valid: sample_valid,
-        patch,
-        ..
+        t, gx, gy, patch, ..
     } = scratch;
     for _ in 0..config.max_iterations {
         let (x, y) = (p.x + d.x, p.y + d.y);
         let (bx, by) = if unwarped && sample_window(j_img, x, y, half, patch) {
             gradient_error_sums(patch, t, gx, gy)
-        } else if unwarped {
-            // The window reaches past the border: skip the samples the image does not define.
-            sample_window_or_nan(j_img, x, y, half, patch);
-            masked_gradient_error_sums(patch, t, gx, gy)
         } else {
-            let (mut bx, mut by) = (0.0f32, 0.0f32);
-            let mut k = 0;
-            for j in -half..=half {
-                for i in -half..=half {
-                    let o = linear * Vector2::new(i as f32, j as f32);
-                    if sample_valid[k]
-                        && let Some(jv) = j_img.sample_bilinear(p.x + d.x + o.x, p.y + d.y + o.y)
-                    {
-                        let e = jv - t[k];
-                        bx += gx[k] * e;
-                        by += gy[k] * e;
-                    }
-                    k += 1;
-                }
+            // The window reaches past the border or is deformed: samples are taken one by
+            // one, and those the image does not define are skipped.
+            if unwarped {
+                sample_window_or_nan(j_img, x, y, half, patch);
+            } else {
+                sample_window_warped(j_img, x, y, linear, half, patch);
             }
-            (bx, by)
+            masked_gradient_error_sums(patch, t, gx, gy)
         };
         let step = Vector2::new(inv[0] * bx + inv[1] * by, inv[1] * bx + inv[2] * by);
         d -= step;
@@ -743,6 +744,45 @@ fn sample_window_or_nan(image: &GrayImage, x: f32, y: f32, r: i32, out: &mut Vec
             .zip(&bottom[1..])
         {
             *o = w00 * a + w10 * b + w01 * c + w11 * e;
+        }
+    }
+}
+
+/// Samples of the window deformed by `linear` around `(x, y)`: entry `(i, j)` (row-major,
+/// `i, j` in `−r..=r`) is the bilinear sample at `(x, y) + linear·(i, j)`, or NaN where
+/// bilinear sampling is not defined.
+fn sample_window_warped(
+    image: &GrayImage,
+    x: f32,
+    y: f32,
+    linear: &Matrix2<f32>,
+    r: i32,
+    out: &mut Vec<f32>,
+) {
+    out.clear();
+    let (w, h) = (image.width() as f32, image.height() as f32);
+    let stride = image.width() as usize;
+    let data = image.as_slice();
+    let (ax, ay) = (linear[(0, 0)], linear[(1, 0)]);
+    let (bx, by) = (linear[(0, 1)], linear[(1, 1)]);
+    for j in -r..=r {
+        let (fj, fi0) = (j as f32, -r as f32);
+        for i in 0..2 * r + 1 {
+            let fi = fi0 + i as f32;
+            let (u, v) = (x + ax * fi + bx * fj, y + ay * fi + by * fj);
+            // `u < w − 1` ⇔ the pixel right of floor(u) exists (w is an integer); NaN fails.
+            if !(u >= 0.0 && v >= 0.0 && u < w - 1.0 && v < h - 1.0) {
+                out.push(f32::NAN);
+                continue;
+            }
+            // Non-negative, so truncation is the floor.
+            let (u0, v0) = (u as usize, v as usize);
+            let (fu, fv) = (u - u0 as f32, v - v0 as f32);
+            let k = v0 * stride + u0;
+            let (a, b, c, e) = (data[k], data[k + 1], data[k + stride], data[k + stride + 1]);
+            let top = a + (b - a) * fu;
+            let bottom = c + (e - c) * fu;
+            out.push(top + (bottom - top) * fv);
         }
     }
 }
@@ -853,6 +893,23 @@ mod tests {
                 for i in -4..=4 {
                     match img.sample_bilinear(x + i as f32, y + j as f32) {
                         Some(v) => assert!((out[k] - v).abs() < 1e-5, "{x},{y} {i},{j}"),
+                        None => assert!(out[k].is_nan(), "{x},{y} {i},{j}: {}", out[k]),
+                    }
+                    k += 1;
+                }
+            }
+        }
+        // Deformed windows, inside and across the border.
+        let linear = Matrix2::new(0.98f32, -0.17, 0.17, 0.98) * 1.05;
+        for &(x, y) in &centres {
+            sample_window_warped(&img, x, y, &linear, 4, &mut out);
+            assert_eq!(out.len(), 81);
+            let mut k = 0;
+            for j in -4..=4 {
+                for i in -4..=4 {
+                    let o = linear * Vector2::new(i as f32, j as f32);
+                    match img.sample_bilinear(x + o.x, y + o.y) {
+                        Some(v) => assert!((out[k] - v).abs() < 1e-4, "{x},{y} {i},{j}"),
                         None => assert!(out[k].is_nan(), "{x},{y} {i},{j}: {}", out[k]),
                     }
                     k += 1;
