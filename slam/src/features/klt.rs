@@ -248,7 +248,37 @@ pub fn track_points_warped(
     next_from_prev_linear: &Matrix2<f32>,
     config: &KltConfig,
 ) -> Result<Vec<KltTrack>, FeatureError> {
+    track_points_warped_from(prev, next, points, None, next_from_prev_linear, config)
+}
+
+/// As [`track_points_warped`], refining an earlier pass `initial` (one track per point, for
+/// example from [`track_points`]): a point whose initial status is
+/// [`KltStatus::Tracked`] starts from its initial position and is refined on the full-resolution
+/// level only (forward, and backward from the forward result), which is all a refinement by a
+/// few tenths of a pixel needs; the other points are tracked through the whole pyramid as in
+/// [`track_points_warped`]. With `initial` `None` this is [`track_points_warped`].
+///
+/// # Errors
+/// As [`track_points_warped`]; [`FeatureError::SizeMismatch`] when `initial` and `points`
+/// differ in length.
+pub fn track_points_warped_from(
+    prev: &KltPyramid,
+    next: &KltPyramid,
+    points: &[Point2<f32>],
+    initial: Option<&[KltTrack]>,
+    next_from_prev_linear: &Matrix2<f32>,
+    config: &KltConfig,
+) -> Result<Vec<KltTrack>, FeatureError> {
     config.validate()?;
+    if let Some(initial) = initial
+        && initial.len() != points.len()
+    {
+        return Err(FeatureError::SizeMismatch {
+            what: "points and their initial tracks",
+            left: points.len(),
+            right: initial.len(),
+        });
+    }
     let linear = *next_from_prev_linear;
     let inverse = linear
         .try_inverse()
@@ -273,10 +303,17 @@ pub fn track_points_warped(
     let levels = prev.levels().min(config.pyramid_levels);
     Ok(points
         .par_iter()
-        .map(|&p| {
+        .enumerate()
+        .map(|(k, &p)| {
+            // A refined point starts from its earlier match, on level 0 only.
+            let start = initial
+                .map(|tracks| tracks[k])
+                .filter(|t| t.status == KltStatus::Tracked)
+                .map(|t| t.position - p);
+            let levels = if start.is_some() { 1 } else { levels };
             // One set of buffers per point, reused by every level of both directions.
             let mut scratch = Scratch::default();
-            let forward = track_one(prev, next, p, &linear, levels, config, &mut scratch);
+            let forward = track_one(prev, next, p, &linear, levels, start, config, &mut scratch);
             if forward.status != KltStatus::Tracked {
                 return forward;
             }
@@ -289,6 +326,7 @@ pub fn track_points_warped(
                 forward.position,
                 &inverse,
                 levels,
+                start.map(|_| p - forward.position),
                 config,
                 &mut scratch,
             );
@@ -528,13 +566,16 @@ fn abs_difference_sum(a: &[f32], b: &[f32]) -> f32 {
     acc.iter().sum()
 }
 
-/// Tracks one point coarse to fine.
+/// Tracks one point coarse to fine through `levels` levels, from the displacement `start`
+/// (level-0 px; zero when `None`).
+#[allow(clippy::too_many_arguments)]
 fn track_one(
     prev: &KltPyramid,
     next: &KltPyramid,
     p0: Point2<f32>,
     linear: &Matrix2<f32>,
     levels: usize,
+    start: Option<Vector2<f32>>,
     config: &KltConfig,
     scratch: &mut Scratch,
 ) -> KltTrack {
@@ -548,7 +589,8 @@ fn track_one(
         return failed(KltStatus::OutOfImage);
     }
     let half = (config.window_px / 2) as i32;
-    let mut d = Vector2::zeros();
+    // The displacement at the coarsest level used, in that level's pixels.
+    let mut d = start.unwrap_or_else(Vector2::zeros) * 0.5f32.powi(levels as i32 - 1);
     for level in (0..levels).rev() {
         let (t_img, j_img) = (&prev.levels[level], &next.levels[level]);
         let p = to_level(p0, level);

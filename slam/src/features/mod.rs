@@ -47,7 +47,10 @@ pub mod pattern;
 mod similarity;
 
 pub use corners::{Corner, CornerConfig, CornerRegion, CornerScore, PixelRect, detect_corners};
-pub use klt::{KltConfig, KltPyramid, KltStatus, KltTrack, track_points, track_points_warped};
+pub use klt::{
+    KltConfig, KltPyramid, KltStatus, KltTrack, track_points, track_points_warped,
+    track_points_warped_from,
+};
 pub use motion::{MotionConfig, similarity_from_tracks, track_similarity};
 pub use similarity::{
     Similarity2, SimilarityFit, SimilarityFitConfig, fit_similarity_least_squares,

@@ -7,7 +7,7 @@ use serde::{Deserialize, Serialize};
 
 use super::{
     FeatureError, KltConfig, KltPyramid, KltStatus, KltTrack, SimilarityFit, SimilarityFitConfig,
-    fit_similarity_robust, track_points_warped,
+    fit_similarity_robust, track_points_warped, track_points_warped_from,
 };
 
 /// Parameters of [`track_similarity`].
@@ -18,9 +18,9 @@ pub struct MotionConfig {
     pub klt: KltConfig,
     /// Robust fit.
     pub fit: SimilarityFitConfig,
-    /// Re-tracking passes with the fitted linear part applied to the windows. Default 1: one
-    /// pass brings a 5° rotation or 10% zoom from ≈ 0.1 px to a few hundredths. 0 skips it
-    /// (half the cost).
+    /// Re-tracking passes with the fitted linear part applied to the windows, each refining the
+    /// previous pass's matches on the full-resolution level. Default 1: one pass brings a 5°
+    /// rotation or 10% zoom from ≈ 0.1 px to a few hundredths. 0 skips it.
     pub refinement_passes: usize,
 }
 
@@ -36,18 +36,6 @@ impl Default for MotionConfig {
 
 /// Point pairs: sources in `prev`, destinations in `next`, px.
 type PointPairs = (Vec<Point2<f64>>, Vec<Point2<f64>>);
-
-/// Tracked pairs (source, destination) in f64.
-fn tracked_pairs(
-    points: &[Point2<f32>],
-    prev: &KltPyramid,
-    next: &KltPyramid,
-    linear: &Matrix2<f32>,
-    klt: &KltConfig,
-) -> Result<PointPairs, FeatureError> {
-    let tracks = track_points_warped(prev, next, points, linear, klt)?;
-    pairs_of_tracks(points, &tracks)
-}
 
 /// The pairs (source, destination) of the points whose track succeeded.
 ///
@@ -110,16 +98,24 @@ pub fn similarity_from_tracks(
 ) -> Result<SimilarityFit, FeatureError> {
     let (src, dst) = pairs_of_tracks(points, tracks)?;
     let mut fit = fit_similarity_robust(&src, &dst, &config.fit)?;
+    let mut last = tracks.to_vec();
     for _ in 0..config.refinement_passes {
         let t = fit.transform;
         let linear = Matrix2::new(t.a as f32, -t.b as f32, t.b as f32, t.a as f32);
-        let Ok((src, dst)) = tracked_pairs(points, prev, next, &linear, &config.klt) else {
+        // Each pass refines the previous one's matches at full resolution.
+        let Ok(refined) =
+            track_points_warped_from(prev, next, points, Some(&last), &linear, &config.klt)
+        else {
+            break;
+        };
+        let Ok((src, dst)) = pairs_of_tracks(points, &refined) else {
             break;
         };
         match fit_similarity_robust(&src, &dst, &config.fit) {
-            Ok(refined) => fit = refined,
+            Ok(refined_fit) => fit = refined_fit,
             Err(_) => break,
         }
+        last = refined;
     }
     Ok(fit)
 }
