@@ -10,7 +10,8 @@
 //! - `rendered_lawnmower`: the first frames of the default world's lawn-mower survey (20 m
 //!   altitude, 80° HFOV, 2000-frame sweep as `scarp render --path lawnmower`), rendered, with
 //!   eight 36–50 px boxes spread over the frame, and the tracker config of
-//!   `configs/track_lawnmower.toml` (the one the lawn-mower figure uses).
+//!   `configs/track_lawnmower.toml` (the one the lawn-mower figure uses), and the same
+//!   with `motion.refine_from_previous_pass`.
 //!
 //! Each benchmark's setup runs only when it is selected, so a filtered run (for a profiler)
 //! contains only that benchmark's work.
@@ -138,6 +139,14 @@ fn bench(c: &mut Criterion) {
         c,
         "rendered_lawnmower",
         &lawnmower_config(),
+        &rendered_lawnmower_frames,
+    );
+    let mut shortcut = lawnmower_config();
+    shortcut.motion.refine_from_previous_pass = true;
+    bench_step(
+        c,
+        "rendered_lawnmower_refine_from_previous_pass",
+        &shortcut,
         &rendered_lawnmower_frames,
     );
 }

@@ -991,6 +991,47 @@ mod tests {
     }
 
     #[test]
+    fn refinement_from_an_earlier_pass_matches_full_retracking() {
+        // A 4° rotation and 3% zoom about (80, 60), plus a shift.
+        let (c, s) = (
+            1.03 * 4f32.to_radians().cos(),
+            1.03 * 4f32.to_radians().sin(),
+        );
+        let warp = |x: f32, y: f32| {
+            let (u, v) = (x - 80.0, y - 60.0);
+            (80.0 + c * u - s * v + 2.3, 60.0 + s * u + c * v - 1.1)
+        };
+        let prev = image(160, 120, texture);
+        // next(warp(p)) = prev(p): invert the similarity per pixel.
+        let next = image(160, 120, |x, y| {
+            let (u, v) = (x - 80.0 - 2.3, y - 60.0 + 1.1);
+            let det = c * c + s * s;
+            texture(80.0 + (c * u + s * v) / det, 60.0 + (-s * u + c * v) / det)
+        });
+        let points: Vec<_> = (0..12)
+            .map(|k| Point2::new(50.0 + (k % 4) as f32 * 20.0, 40.0 + (k / 4) as f32 * 20.0))
+            .collect();
+        let (pp, np) = (KltPyramid::new(&prev, 3), KltPyramid::new(&next, 3));
+        let config = KltConfig::default();
+        let linear = Matrix2::new(c, -s, s, c);
+        let first = track_points(&pp, &np, &points, &config).unwrap();
+        let full = track_points_warped(&pp, &np, &points, &linear, &config).unwrap();
+        let warm =
+            track_points_warped_from(&pp, &np, &points, Some(&first), &linear, &config).unwrap();
+        for ((p, f), w) in points.iter().zip(&full).zip(&warm) {
+            let (tx, ty) = warp(p.x, p.y);
+            assert_eq!(f.status, KltStatus::Tracked, "{p:?}: {f:?}");
+            assert_eq!(w.status, KltStatus::Tracked, "{p:?}: {w:?}");
+            assert!((w.position - f.position).norm() < 0.02, "{w:?} vs {f:?}");
+            assert!((w.position.x - tx).abs() < 0.05 && (w.position.y - ty).abs() < 0.05);
+        }
+        assert!(matches!(
+            track_points_warped_from(&pp, &np, &points, Some(&first[1..]), &linear, &config),
+            Err(FeatureError::SizeMismatch { .. })
+        ));
+    }
+
+    #[test]
     fn forward_backward_rejects_occluded_points() {
         let (dx, dy) = (3.0f32, 2.0f32);
         let prev = image(200, 160, texture);

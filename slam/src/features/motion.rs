@@ -18,10 +18,16 @@ pub struct MotionConfig {
     pub klt: KltConfig,
     /// Robust fit.
     pub fit: SimilarityFitConfig,
-    /// Re-tracking passes with the fitted linear part applied to the windows, each refining the
-    /// previous pass's matches on the full-resolution level. Default 1: one pass brings a 5°
-    /// rotation or 10% zoom from ≈ 0.1 px to a few hundredths. 0 skips it.
+    /// Re-tracking passes with the fitted linear part applied to the windows. Default 1: one
+    /// pass brings a 5° rotation or 10% zoom from ≈ 0.1 px to a few hundredths. 0 skips it.
     pub refinement_passes: usize,
+    /// Whether a refinement pass starts each point from the previous pass's match and works on
+    /// the full-resolution level only (forward and backward), instead of re-tracking it
+    /// through the whole pyramid. About a third of the cost of a pass with 4 levels and the
+    /// same warp accuracy, but the forward–backward check of the pass then only tests local
+    /// consistency. Default false (the full re-tracking; on the lawn-mower figure the
+    /// shortcut moved one seed's mean IoU from 0.797 to 0.796).
+    pub refine_from_previous_pass: bool,
 }
 
 impl Default for MotionConfig {
@@ -30,6 +36,7 @@ impl Default for MotionConfig {
             klt: KltConfig::default(),
             fit: SimilarityFitConfig::default(),
             refinement_passes: 1,
+            refine_from_previous_pass: false,
         }
     }
 }
@@ -102,9 +109,9 @@ pub fn similarity_from_tracks(
     for _ in 0..config.refinement_passes {
         let t = fit.transform;
         let linear = Matrix2::new(t.a as f32, -t.b as f32, t.b as f32, t.a as f32);
-        // Each pass refines the previous one's matches at full resolution.
+        let initial = config.refine_from_previous_pass.then_some(last.as_slice());
         let Ok(refined) =
-            track_points_warped_from(prev, next, points, Some(&last), &linear, &config.klt)
+            track_points_warped_from(prev, next, points, initial, &linear, &config.klt)
         else {
             break;
         };
