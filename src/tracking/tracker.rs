@@ -15,12 +15,17 @@
 //!    `confirm_window_frames` frames, and drops it if it cannot.
 //!
 //! Ids are assigned in registration order and never reused. The result is deterministic: the
-//! only parallel part (KLT over points) does not depend on the thread count.
+//! only parallel part (one KLT pass over the corners of every box at once) does not depend on
+//! the thread count.
+//!
+//! Cost: the frame's intensity pyramid is built once per step and kept for the next one, and
+//! only when there is a track to predict or to keep (frames without tracks cost almost
+//! nothing); corners are searched only inside each box.
 
 use nalgebra::{Matrix3, Matrix4, Point2, Vector4};
 use scarp_slam::features::{
-    CornerConfig, CornerRegion, FeatureError, KltPyramid, KltStatus, MotionConfig, PixelRect,
-    Similarity2, detect_corners, track_points, track_similarity,
+    CornerConfig, CornerRegion, FeatureError, KltPyramid, KltStatus, KltTrack, MotionConfig,
+    PixelRect, Similarity2, detect_corners, similarity_from_tracks, track_points,
 };
 use scarp_slam::image::GrayImage;
 use serde::{Deserialize, Serialize};
@@ -223,7 +228,10 @@ pub struct Tracker {
     config: TrackerConfig,
     tracks: Vec<Track>,
     next_id: u64,
+    /// The previous frame's pyramid, kept only when tracks survived that frame.
     previous: Option<KltPyramid>,
+    /// Width and height of the frames seen so far, px.
+    frame_size: Option<(u32, u32)>,
 }
 
 impl Tracker {
@@ -238,6 +246,7 @@ impl Tracker {
             tracks: Vec::new(),
             next_id: 1,
             previous: None,
+            frame_size: None,
         })
     }
 
@@ -270,11 +279,9 @@ impl Tracker {
                 return Err(TrackingError::InvalidDetection { index });
             }
         }
-        let pyramid = KltPyramid::new(frame_gray, self.config.motion.klt.pyramid_levels);
-        if let Some(prev) = &self.previous
-            && prev.size() != (width, height)
+        if let Some((pw, ph)) = self.frame_size
+            && (pw, ph) != (width, height)
         {
-            let (pw, ph) = prev.size();
             return Err(TrackingError::FrameSize {
                 expected_width: pw,
                 expected_height: ph,
@@ -282,11 +289,20 @@ impl Tracker {
                 height,
             });
         }
+        self.frame_size = Some((width, height));
+        let levels = self.config.motion.klt.pyramid_levels;
+        // Built only when a track needs it: for prediction now, or as the next step's
+        // previous frame.
+        let mut pyramid = None;
 
-        // 1. Predict.
-        let motions = match &self.previous {
-            Some(prev) => self.box_motions(prev, &pyramid)?,
-            None => vec![Matrix3::identity(); self.tracks.len()],
+        // 1. Predict. Tracks exist only if they survived the previous step, which then kept
+        // its pyramid.
+        let motions = match (&self.previous, self.tracks.is_empty()) {
+            (Some(prev), false) => {
+                let next = pyramid.insert(KltPyramid::new(frame_gray, levels));
+                self.box_motions(prev, next)?
+            }
+            _ => vec![Matrix3::identity(); self.tracks.len()],
         };
         for (track, s) in self.tracks.iter_mut().zip(&motions) {
             track.estimate = predict(&track.estimate, s, self.config.prediction_variance_px2);
@@ -370,50 +386,59 @@ impl Tracker {
             t.hits + remaining >= hits_needed
         });
 
-        self.previous = Some(pyramid);
+        self.previous = if self.tracks.is_empty() {
+            None
+        } else {
+            Some(pyramid.unwrap_or_else(|| KltPyramid::new(frame_gray, levels)))
+        };
         Ok(self.tracks())
     }
 
-    /// The homogeneous similarity `next_from_prev` of every track's box.
+    /// The homogeneous similarity `next_from_prev` of every track's box. The corners of all
+    /// boxes are tracked in one parallel KLT pass; each box is then fitted on its own.
     fn box_motions(
         &self,
         prev: &KltPyramid,
         next: &KltPyramid,
     ) -> Result<Vec<Matrix3<f64>>, TrackingError> {
         let (w, h) = prev.size();
-        let mut motions = Vec::with_capacity(self.tracks.len());
+        let mut points: Vec<Point2<f32>> = Vec::new();
+        let mut ranges = Vec::with_capacity(self.tracks.len());
         for t in &self.tracks {
             let b = t.bbox();
-            let points: Vec<Point2<f32>> =
-                match PixelRect::from_continuous(b.x_min, b.y_min, b.x_max, b.y_max, w, h) {
-                    Some(rect) => detect_corners(
-                        prev.base(),
-                        &self.config.corners,
-                        &CornerRegion::Rect(rect),
-                    )?
-                    .iter()
-                    .map(|c| c.position)
-                    .collect(),
-                    None => Vec::new(),
-                };
-            motions.push(self.box_motion(prev, next, &points)?.matrix());
+            let start = points.len();
+            if let Some(rect) = PixelRect::from_continuous(b.x_min, b.y_min, b.x_max, b.y_max, w, h)
+            {
+                let corners =
+                    detect_corners(prev.base(), &self.config.corners, &CornerRegion::Rect(rect))?;
+                points.extend(corners.iter().map(|c| c.position));
+            }
+            ranges.push(start..points.len());
         }
-        Ok(motions)
+        let tracks = track_points(prev, next, &points, &self.config.motion.klt)?;
+        ranges
+            .into_iter()
+            .map(|r| {
+                let motion = self.box_motion(prev, next, &points[r.clone()], &tracks[r])?;
+                Ok(motion.matrix())
+            })
+            .collect()
     }
 
-    /// The motion of one box's corners: a robust similarity when enough corners agree, else
-    /// their median shift, else the identity.
+    /// The motion of one box's corners `points` given their KLT `tracks`: a robust
+    /// similarity when enough corners agree, else their median shift, else the identity.
     fn box_motion(
         &self,
         prev: &KltPyramid,
         next: &KltPyramid,
         points: &[Point2<f32>],
+        tracks: &[KltTrack],
     ) -> Result<Similarity2, TrackingError> {
         if points.is_empty() {
             return Ok(Similarity2::identity());
         }
         if points.len() >= self.config.min_tracked_points {
-            match track_similarity(prev, next, points, &self.config.motion) {
+            match similarity_from_tracks(prev, next, points, tracks, &self.config.motion) {
                 Ok(fit)
                     if fit.inlier_count() >= self.config.min_tracked_points
                         && (fit.transform.scale() - 1.0).abs() <= self.config.max_scale_change
@@ -426,10 +451,9 @@ impl Tracker {
                 Err(e) => return Err(e.into()),
             }
         }
-        let tracks = track_points(prev, next, points, &self.config.motion.klt)?;
         let (mut dx, mut dy): (Vec<f64>, Vec<f64>) = points
             .iter()
-            .zip(&tracks)
+            .zip(tracks)
             .filter(|(_, t)| t.status == KltStatus::Tracked)
             .map(|(p, t)| (f64::from(t.position.x - p.x), f64::from(t.position.y - p.y)))
             .unzip();
