@@ -18,7 +18,9 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::FeatureError;
-use crate::image::{GrayImage, downsample_gray};
+use crate::image::GrayImage;
+#[cfg(test)]
+use crate::image::downsample_gray;
 
 /// Lucas–Kanade parameters.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -109,7 +111,7 @@ impl KltPyramid {
             if last.width() < 4 || last.height() < 4 {
                 break;
             }
-            let next = downsample_gray(&smoothed(last));
+            let next = half_level(last);
             out.push(next);
         }
         Self { levels: out }
@@ -136,9 +138,66 @@ impl KltPyramid {
     }
 }
 
-/// The image blurred by the separable `[1, 2, 1]/4` kernel (edges replicated), so that the
-/// 2×2 averages of the next level do not alias fine texture. The kernel is centred, so the
-/// pyramid geometry is unchanged.
+/// The next pyramid level of `image` (at least 2×2): its 2×2 block averages
+/// ([`crate::image::downsample_gray`]) after a separable `[1, 2, 1]/4` blur (edges replicated),
+/// which keeps
+/// them from aliasing fine texture (the kernel is centred, so the pyramid geometry is
+/// unchanged). Computed one coarse row at a time from the four fine rows it needs, without the
+/// full-resolution blurred image, the same sums in the same order as the two-step form; rows
+/// are independent, so they run in parallel with a result that does not depend on the thread
+/// count.
+fn half_level(image: &GrayImage) -> GrayImage {
+    let (w, h) = (image.width() as usize, image.height() as usize);
+    let (cw, ch) = ((w / 2).max(1), (h / 2).max(1));
+    let src = image.as_slice();
+    let mut out = vec![0.0f32; cw * ch];
+    out.par_chunks_mut(cw).enumerate().for_each_init(
+        || vec![0.0f32; 6 * w],
+        |buf, (v, dst)| {
+            let fine_row = |k: isize| {
+                let y = (2 * v as isize + k).clamp(0, h as isize - 1) as usize;
+                &src[y * w..][..w]
+            };
+            let (blurred, rest) = buf.split_at_mut(4 * w);
+            let (top, bottom) = rest.split_at_mut(w);
+            // Horizontal pass over fine rows 2v − 1 ..= 2v + 2 (edges replicated).
+            for (k, row) in blurred.chunks_exact_mut(w).enumerate() {
+                smooth_row(fine_row(k as isize - 1), row);
+            }
+            let (r0, r1, r2, r3) = (
+                &blurred[..w],
+                &blurred[w..2 * w],
+                &blurred[2 * w..3 * w],
+                &blurred[3 * w..],
+            );
+            // Vertical pass for fine rows 2v and 2v + 1 (2v + 1 < h since v < h / 2 when
+            // h ≥ 2; a one-row image repeats its row).
+            let two_rows = 2 * v + 1 < h;
+            for (((o, a), b), c) in top.iter_mut().zip(r0).zip(r2).zip(r1) {
+                *o = 0.25 * (a + b) + 0.5 * c;
+            }
+            if two_rows {
+                for (((o, a), b), c) in bottom.iter_mut().zip(r1).zip(r3).zip(r2) {
+                    *o = 0.25 * (a + b) + 0.5 * c;
+                }
+            } else {
+                bottom.copy_from_slice(top);
+            }
+            // 2×2 averages, summed in downsample_gray's order.
+            let max_u = w - 1;
+            for (u, o) in dst.iter_mut().enumerate() {
+                let (u0, u1) = ((2 * u).min(max_u), (2 * u + 1).min(max_u));
+                *o = (top[u0] + top[u1] + bottom[u0] + bottom[u1]) * 0.25;
+            }
+        },
+    );
+    // cw·ch values by construction.
+    GrayImage::from_vec(cw as u32, ch as u32, out).expect("cw·ch pixels")
+}
+
+/// The image blurred by the separable `[1, 2, 1]/4` kernel (edges replicated): the reference
+/// form of [`half_level`]'s blur.
+#[cfg(test)]
 fn smoothed(image: &GrayImage) -> GrayImage {
     let (w, h) = (image.width() as usize, image.height() as usize);
     let src = image.as_slice();
@@ -162,7 +221,7 @@ fn smoothed(image: &GrayImage) -> GrayImage {
     GrayImage::from_vec(image.width(), image.height(), out).expect("w·h pixels")
 }
 
-/// One row of [`smoothed`]'s horizontal pass: `out[u] = (r[u−1] + r[u+1])/4 + r[u]/2`, edges
+/// One row of the blur's horizontal pass: `out[u] = (r[u−1] + r[u+1])/4 + r[u]/2`, edges
 /// replicated. `r` and `out` have the same, non-zero length.
 fn smooth_row(r: &[f32], out: &mut [f32]) {
     let w = r.len().min(out.len());
@@ -811,14 +870,11 @@ fn sample_window(image: &GrayImage, x: f32, y: f32, r: i32, out: &mut Vec<f32>) 
     for (j, row) in out.chunks_exact_mut(side).enumerate() {
         let top = &data[(y0 + j) * stride + x0..][..side + 1];
         let bottom = &data[(y0 + j + 1) * stride + x0..][..side + 1];
-        for ((((o, a), b), c), e) in row
-            .iter_mut()
-            .zip(&top[..side])
-            .zip(&top[1..])
-            .zip(&bottom[..side])
-            .zip(&bottom[1..])
-        {
-            *o = w00 * a + w10 * b + w01 * c + w11 * e;
+        // Equal-length slices, indexed in step, so the loop compiles to vector lanes.
+        let (a, b) = (&top[..side], &top[1..]);
+        let (c, e) = (&bottom[..side], &bottom[1..]);
+        for i in 0..side {
+            row[i] = w00 * a[i] + w10 * b[i] + w01 * c[i] + w11 * e[i];
         }
     }
     true
@@ -1046,6 +1102,38 @@ mod tests {
         };
         let refused = track_points_guided(&prev_pyramid, &next_pyramid, &[singular], &config);
         assert_eq!(refused.unwrap()[0].status, KltStatus::Untextured);
+    }
+
+    #[test]
+    fn pyramid_levels_equal_blur_then_block_average() {
+        for (w, h) in [
+            (64u32, 48u32),
+            (7, 5),
+            (9, 4),
+            (5, 9),
+            (2, 2),
+            (1, 3),
+            (3, 1),
+        ] {
+            let img = image(w, h, texture);
+            let fused = half_level(&img);
+            let reference = downsample_gray(&smoothed(&img));
+            assert_eq!(
+                (fused.width(), fused.height()),
+                (reference.width(), reference.height())
+            );
+            for (a, b) in fused.as_slice().iter().zip(reference.as_slice()) {
+                assert_eq!(a, b, "{w}×{h}");
+            }
+        }
+        // The same for any number of threads.
+        let img = image(64, 48, texture);
+        let one = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .unwrap()
+            .install(|| half_level(&img));
+        assert_eq!(one.as_slice(), half_level(&img).as_slice());
     }
 
     #[test]
