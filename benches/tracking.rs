@@ -10,8 +10,10 @@
 //! - `rendered_lawnmower`: the first frames of the default world's lawn-mower survey (20 m
 //!   altitude, 80° HFOV, 2000-frame sweep as `scarp render --path lawnmower`), rendered, with
 //!   eight 36–50 px boxes spread over the frame, and the tracker config of
-//!   `configs/track_lawnmower.toml` (the one the lawn-mower figure uses), and the same
-//!   with `motion.refine_from_previous_pass`.
+//!   `configs/track_lawnmower.toml` (the one the lawn-mower figure uses: no
+//!   refinement pass), then the same with one warped refinement pass re-tracked through the
+//!   pyramid (`_refinement_pass`) or refined from the first pass on the full-resolution level
+//!   (`_refine_from_previous_pass`).
 //!
 //! Each benchmark's setup runs only when it is selected, so a filtered run (for a profiler)
 //! contains only that benchmark's work.
@@ -141,7 +143,16 @@ fn bench(c: &mut Criterion) {
         &lawnmower_config(),
         &rendered_lawnmower_frames,
     );
-    let mut shortcut = lawnmower_config();
+    let mut refined = lawnmower_config();
+    refined.motion.refinement_passes = 1;
+    refined.motion.refine_from_previous_pass = false;
+    bench_step(
+        c,
+        "rendered_lawnmower_refinement_pass",
+        &refined,
+        &rendered_lawnmower_frames,
+    );
+    let mut shortcut = refined;
     shortcut.motion.refine_from_previous_pass = true;
     bench_step(
         c,
