@@ -18,7 +18,9 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::FeatureError;
-use crate::image::{GrayImage, downsample_gray};
+use crate::image::GrayImage;
+#[cfg(test)]
+use crate::image::downsample_gray;
 
 /// Lucas–Kanade parameters.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -109,7 +111,7 @@ impl KltPyramid {
             if last.width() < 4 || last.height() < 4 {
                 break;
             }
-            let next = downsample_gray(&smoothed(last));
+            let next = half_level(last);
             out.push(next);
         }
         Self { levels: out }
@@ -136,29 +138,110 @@ impl KltPyramid {
     }
 }
 
-/// The image blurred by the separable `[1, 2, 1]/4` kernel (edges replicated), so that the
-/// 2×2 averages of the next level do not alias fine texture. The kernel is centred, so the
-/// pyramid geometry is unchanged.
+/// The next pyramid level of `image` (at least 2×2): its 2×2 block averages
+/// ([`crate::image::downsample_gray`]) after a separable `[1, 2, 1]/4` blur (edges replicated),
+/// which keeps
+/// them from aliasing fine texture (the kernel is centred, so the pyramid geometry is
+/// unchanged). Computed one coarse row at a time from the four fine rows it needs, without the
+/// full-resolution blurred image, the same sums in the same order as the two-step form; rows
+/// are independent, so they run in parallel with a result that does not depend on the thread
+/// count.
+fn half_level(image: &GrayImage) -> GrayImage {
+    let (w, h) = (image.width() as usize, image.height() as usize);
+    let (cw, ch) = ((w / 2).max(1), (h / 2).max(1));
+    let src = image.as_slice();
+    let mut out = vec![0.0f32; cw * ch];
+    out.par_chunks_mut(cw).enumerate().for_each_init(
+        || vec![0.0f32; 6 * w],
+        |buf, (v, dst)| {
+            let fine_row = |k: isize| {
+                let y = (2 * v as isize + k).clamp(0, h as isize - 1) as usize;
+                &src[y * w..][..w]
+            };
+            let (blurred, rest) = buf.split_at_mut(4 * w);
+            let (top, bottom) = rest.split_at_mut(w);
+            // Horizontal pass over fine rows 2v − 1 ..= 2v + 2 (edges replicated).
+            for (k, row) in blurred.chunks_exact_mut(w).enumerate() {
+                smooth_row(fine_row(k as isize - 1), row);
+            }
+            let (r0, r1, r2, r3) = (
+                &blurred[..w],
+                &blurred[w..2 * w],
+                &blurred[2 * w..3 * w],
+                &blurred[3 * w..],
+            );
+            // Vertical pass for fine rows 2v and 2v + 1 (2v + 1 < h since v < h / 2 when
+            // h ≥ 2; a one-row image repeats its row).
+            let two_rows = 2 * v + 1 < h;
+            for (((o, a), b), c) in top.iter_mut().zip(r0).zip(r2).zip(r1) {
+                *o = 0.25 * (a + b) + 0.5 * c;
+            }
+            if two_rows {
+                for (((o, a), b), c) in bottom.iter_mut().zip(r1).zip(r3).zip(r2) {
+                    *o = 0.25 * (a + b) + 0.5 * c;
+                }
+            } else {
+                bottom.copy_from_slice(top);
+            }
+            // 2×2 averages, summed in downsample_gray's order.
+            let max_u = w - 1;
+            for (u, o) in dst.iter_mut().enumerate() {
+                let (u0, u1) = ((2 * u).min(max_u), (2 * u + 1).min(max_u));
+                *o = (top[u0] + top[u1] + bottom[u0] + bottom[u1]) * 0.25;
+            }
+        },
+    );
+    // cw·ch values by construction.
+    GrayImage::from_vec(cw as u32, ch as u32, out).expect("cw·ch pixels")
+}
+
+/// The image blurred by the separable `[1, 2, 1]/4` kernel (edges replicated): the reference
+/// form of [`half_level`]'s blur.
+#[cfg(test)]
 fn smoothed(image: &GrayImage) -> GrayImage {
     let (w, h) = (image.width() as usize, image.height() as usize);
     let src = image.as_slice();
     let mut rows = vec![0.0f32; w * h];
-    for v in 0..h {
-        let r = &src[v * w..(v + 1) * w];
-        for u in 0..w {
-            let (l, c, rt) = (r[u.saturating_sub(1)], r[u], r[(u + 1).min(w - 1)]);
-            rows[v * w + u] = 0.25 * (l + rt) + 0.5 * c;
-        }
+    for (r, out) in src.chunks_exact(w).zip(rows.chunks_exact_mut(w)) {
+        smooth_row(r, out);
     }
     let mut out = vec![0.0f32; w * h];
-    for v in 0..h {
+    for (v, dst) in out.chunks_exact_mut(w).enumerate() {
         let (up, down) = (v.saturating_sub(1), (v + 1).min(h - 1));
-        for u in 0..w {
-            out[v * w + u] = 0.25 * (rows[up * w + u] + rows[down * w + u]) + 0.5 * rows[v * w + u];
+        let (a, c, b) = (
+            &rows[up * w..][..w],
+            &rows[v * w..][..w],
+            &rows[down * w..][..w],
+        );
+        for (((o, a), b), c) in dst.iter_mut().zip(a).zip(b).zip(c) {
+            *o = 0.25 * (a + b) + 0.5 * c;
         }
     }
     // Same size as the input, so the length is w·h.
     GrayImage::from_vec(image.width(), image.height(), out).expect("w·h pixels")
+}
+
+/// One row of the blur's horizontal pass: `out[u] = (r[u−1] + r[u+1])/4 + r[u]/2`, edges
+/// replicated. `r` and `out` have the same, non-zero length.
+fn smooth_row(r: &[f32], out: &mut [f32]) {
+    let w = r.len().min(out.len());
+    if w < 3 {
+        for u in 0..w {
+            let (l, c, rt) = (r[u.saturating_sub(1)], r[u], r[(u + 1).min(w - 1)]);
+            out[u] = 0.25 * (l + rt) + 0.5 * c;
+        }
+        return;
+    }
+    out[0] = 0.25 * (r[0] + r[1]) + 0.5 * r[0];
+    for (((o, l), c), rt) in out[1..w - 1]
+        .iter_mut()
+        .zip(&r[..w - 2])
+        .zip(&r[1..w - 1])
+        .zip(&r[2..])
+    {
+        *o = 0.25 * (l + rt) + 0.5 * c;
+    }
+    out[w - 1] = 0.25 * (r[w - 2] + r[w - 1]) + 0.5 * r[w - 1];
 }
 
 /// The outcome of tracking one point.
@@ -224,7 +307,37 @@ pub fn track_points_warped(
     next_from_prev_linear: &Matrix2<f32>,
     config: &KltConfig,
 ) -> Result<Vec<KltTrack>, FeatureError> {
+    track_points_warped_from(prev, next, points, None, next_from_prev_linear, config)
+}
+
+/// As [`track_points_warped`], refining an earlier pass `initial` (one track per point, for
+/// example from [`track_points`]): a point whose initial status is
+/// [`KltStatus::Tracked`] starts from its initial position and is refined on the full-resolution
+/// level only (forward, and backward from the forward result), which is all a refinement by a
+/// few tenths of a pixel needs; the other points are tracked through the whole pyramid as in
+/// [`track_points_warped`]. With `initial` `None` this is [`track_points_warped`].
+///
+/// # Errors
+/// As [`track_points_warped`]; [`FeatureError::SizeMismatch`] when `initial` and `points`
+/// differ in length.
+pub fn track_points_warped_from(
+    prev: &KltPyramid,
+    next: &KltPyramid,
+    points: &[Point2<f32>],
+    initial: Option<&[KltTrack]>,
+    next_from_prev_linear: &Matrix2<f32>,
+    config: &KltConfig,
+) -> Result<Vec<KltTrack>, FeatureError> {
     config.validate()?;
+    if let Some(initial) = initial
+        && initial.len() != points.len()
+    {
+        return Err(FeatureError::SizeMismatch {
+            what: "points and their initial tracks",
+            left: points.len(),
+            right: initial.len(),
+        });
+    }
     let linear = *next_from_prev_linear;
     let inverse = linear
         .try_inverse()
@@ -234,17 +347,18 @@ pub fn track_points_warped(
     let levels = prev.levels().min(config.pyramid_levels);
     Ok(points
         .par_iter()
-        .map(|&p| {
-            track_with_check(
-                prev,
-                next,
-                p,
-                Vector2::zeros(),
-                &linear,
-                &inverse,
-                levels,
-                config,
-            )
+        .enumerate()
+        .map(|(k, &p)| {
+            // A refined point starts from its earlier match, on level 0 only.
+            let start = initial
+                .map(|tracks| tracks[k])
+                .filter(|t| t.status == KltStatus::Tracked)
+                .map(|t| t.position - p);
+            let (guess, levels) = match start {
+                Some(guess) => (guess, 1),
+                None => (Vector2::zeros(), levels),
+            };
+            track_with_check(prev, next, p, guess, &linear, &inverse, levels, config)
         })
         .collect())
 }
@@ -341,7 +455,9 @@ fn track_with_check(
     levels: usize,
     config: &KltConfig,
 ) -> KltTrack {
-    let forward = track_one(prev, next, p, guess, linear, levels, config);
+    // One set of buffers per point, reused by every level of both directions.
+    let mut scratch = Scratch::default();
+    let forward = track_one(prev, next, p, guess, linear, levels, config, &mut scratch);
     if forward.status != KltStatus::Tracked {
         return forward;
     }
@@ -356,6 +472,7 @@ fn track_with_check(
         inverse,
         levels,
         config,
+        &mut scratch,
     );
     let fb = if back.status == KltStatus::Tracked {
         (back.position - p).norm()
@@ -387,7 +504,213 @@ fn inside(image: &GrayImage, p: Point2<f32>) -> bool {
         && p.y < (image.height() as f32 - 1.0)
 }
 
-/// Tracks one point coarse to fine, starting from the displacement `guess` (level-0 px).
+/// Working buffers of one point's tracking, allocated once per point and reused by every
+/// level, iteration and the backward pass (no allocation inside the Gauss–Newton loop).
+///
+/// The template of the current level is kept as separate arrays of intensity and gradients
+/// (row-major over the window), so the per-iteration sums run over contiguous slices. A
+/// template sample that could not be taken (window partly outside the image) has `valid`
+/// false and zero intensity and gradients, so it adds nothing to the Gauss–Newton sums.
+#[derive(Debug, Default)]
+struct Scratch {
+    /// Template intensities.
+    t: Vec<f32>,
+    /// Template x gradients (central differences).
+    gx: Vec<f32>,
+    /// Template y gradients (central differences).
+    gy: Vec<f32>,
+    /// Whether each template sample exists.
+    valid: Vec<bool>,
+    /// Whether every template sample exists (the window and its frame are inside the image).
+    complete: bool,
+    /// Bilinear samples of a window (template with its frame, or the next image's window).
+    patch: Vec<f32>,
+}
+
+impl Scratch {
+    /// Samples the template window of half-size `half` around `p` in `image`, with its
+    /// gradients. Returns the number of valid samples and the normal-matrix entries
+    /// `(Σ gx², Σ gx·gy, Σ gy²)`.
+    fn build_template(
+        &mut self,
+        image: &GrayImage,
+        p: Point2<f32>,
+        half: i32,
+    ) -> (usize, [f32; 3]) {
+        let side = (2 * half + 1) as usize;
+        let n = side * side;
+        self.t.clear();
+        self.gx.clear();
+        self.gy.clear();
+        self.valid.clear();
+        if sample_window(image, p.x, p.y, half + 1, &mut self.patch) {
+            // Fast path: the window and its one-pixel frame are inside the image. Central
+            // differences of the bilinear patch equal bilinear samples of central differences.
+            let stride = side + 2;
+            for j in 0..side {
+                let up = &self.patch[j * stride..][..stride];
+                let row = &self.patch[(j + 1) * stride..][..stride];
+                let down = &self.patch[(j + 2) * stride..][..stride];
+                self.t.extend_from_slice(&row[1..=side]);
+                self.gx.extend(
+                    row[2..]
+                        .iter()
+                        .zip(&row[..side])
+                        .map(|(r, l)| 0.5 * (r - l)),
+                );
+                self.gy.extend(
+                    down[1..=side]
+                        .iter()
+                        .zip(&up[1..=side])
+                        .map(|(d, u)| 0.5 * (d - u)),
+                );
+            }
+            self.valid.resize(n, true);
+            self.complete = true;
+        } else {
+            // Near the border: undefined samples are NaN, and so is every difference that
+            // uses one, which marks the template samples that cannot be taken.
+            sample_window_or_nan(image, p.x, p.y, half + 1, &mut self.patch);
+            let stride = side + 2;
+            for j in 0..side {
+                let up = &self.patch[j * stride..][..stride];
+                let row = &self.patch[(j + 1) * stride..][..stride];
+                let down = &self.patch[(j + 2) * stride..][..stride];
+                for i in 1..=side {
+                    let (t, gx, gy) = (
+                        row[i],
+                        0.5 * (row[i + 1] - row[i - 1]),
+                        0.5 * (down[i] - up[i]),
+                    );
+                    let ok = !(t.is_nan() || gx.is_nan() || gy.is_nan());
+                    let (t, gx, gy) = if ok { (t, gx, gy) } else { (0.0, 0.0, 0.0) };
+                    self.t.push(t);
+                    self.gx.push(gx);
+                    self.gy.push(gy);
+                    self.valid.push(ok);
+                }
+            }
+            self.complete = false;
+        }
+        let valid = if self.complete {
+            n
+        } else {
+            self.valid.iter().filter(|&&v| v).count()
+        };
+        let normal = [
+            lane_dot(&self.gx, &self.gx),
+            lane_dot(&self.gx, &self.gy),
+            lane_dot(&self.gy, &self.gy),
+        ];
+        (valid, normal)
+    }
+}
+
+/// Number of independent accumulators in the window sums (lets the compiler use SIMD lanes;
+/// the summation order is fixed, so results do not depend on the machine's thread count).
+const LANES: usize = 8;
+
+/// `Σ a·b` over two equally long slices, accumulated in [`LANES`] fixed lanes.
+fn lane_dot(a: &[f32], b: &[f32]) -> f32 {
+    let mut acc = [0.0f32; LANES];
+    let (ac, bc) = (a.chunks_exact(LANES), b.chunks_exact(LANES));
+    let (ar, br) = (ac.remainder(), bc.remainder());
+    for (x, y) in ac.zip(bc) {
+        for l in 0..LANES {
+            acc[l] += x[l] * y[l];
+        }
+    }
+    for (l, (x, y)) in ar.iter().zip(br).enumerate() {
+        acc[l] += x * y;
+    }
+    acc.iter().sum()
+}
+
+/// The Gauss–Newton right-hand side `(Σ gx·e, Σ gy·e)` with `e = j − t`, over equally long
+/// slices, in [`LANES`] fixed lanes.
+fn gradient_error_sums(j: &[f32], t: &[f32], gx: &[f32], gy: &[f32]) -> (f32, f32) {
+    let (mut ax, mut ay) = ([0.0f32; LANES], [0.0f32; LANES]);
+    let (jc, tc, xc, yc) = (
+        j.chunks_exact(LANES),
+        t.chunks_exact(LANES),
+        gx.chunks_exact(LANES),
+        gy.chunks_exact(LANES),
+    );
+    let rest = (
+        jc.remainder(),
+        tc.remainder(),
+        xc.remainder(),
+        yc.remainder(),
+    );
+    for (((jv, tv), xv), yv) in jc.zip(tc).zip(xc).zip(yc) {
+        for l in 0..LANES {
+            let e = jv[l] - tv[l];
+            ax[l] += xv[l] * e;
+            ay[l] += yv[l] * e;
+        }
+    }
+    for (l, (((jv, tv), xv), yv)) in rest
+        .0
+        .iter()
+        .zip(rest.1)
+        .zip(rest.2)
+        .zip(rest.3)
+        .enumerate()
+    {
+        let e = jv - tv;
+        ax[l] += xv * e;
+        ay[l] += yv * e;
+    }
+    (ax.iter().sum(), ay.iter().sum())
+}
+
+/// As [`gradient_error_sums`], skipping the entries where `j` is NaN (not sampled).
+fn masked_gradient_error_sums(j: &[f32], t: &[f32], gx: &[f32], gy: &[f32]) -> (f32, f32) {
+    let (mut ax, mut ay) = ([0.0f32; LANES], [0.0f32; LANES]);
+    for (k, (((jv, tv), xv), yv)) in j.iter().zip(t).zip(gx).zip(gy).enumerate() {
+        let e = jv - tv;
+        let e = if e.is_nan() { 0.0 } else { e };
+        ax[k % LANES] += xv * e;
+        ay[k % LANES] += yv * e;
+    }
+    (ax.iter().sum(), ay.iter().sum())
+}
+
+/// The mean of `|j − t|` over the entries where `j` is not NaN; infinite when there are none.
+fn masked_mean_abs_difference(j: &[f32], t: &[f32]) -> f32 {
+    let (mut sum, mut count) = (0.0f32, 0u32);
+    for (jv, tv) in j.iter().zip(t) {
+        if !jv.is_nan() {
+            sum += (jv - tv).abs();
+            count += 1;
+        }
+    }
+    if count == 0 {
+        f32::INFINITY
+    } else {
+        sum / count as f32
+    }
+}
+
+/// `Σ |a − b|` over two equally long slices, in [`LANES`] fixed lanes.
+fn abs_difference_sum(a: &[f32], b: &[f32]) -> f32 {
+    let mut acc = [0.0f32; LANES];
+    let (ac, bc) = (a.chunks_exact(LANES), b.chunks_exact(LANES));
+    let (ar, br) = (ac.remainder(), bc.remainder());
+    for (x, y) in ac.zip(bc) {
+        for l in 0..LANES {
+            acc[l] += (x[l] - y[l]).abs();
+        }
+    }
+    for (l, (x, y)) in ar.iter().zip(br).enumerate() {
+        acc[l] += (x - y).abs();
+    }
+    acc.iter().sum()
+}
+
+/// Tracks one point coarse to fine through `levels` levels, starting from the displacement
+/// `guess` (level-0 px). `scratch` is reused; on return it holds the level-0 template at `p0`.
+#[allow(clippy::too_many_arguments)]
 fn track_one(
     prev: &KltPyramid,
     next: &KltPyramid,
@@ -396,6 +719,7 @@ fn track_one(
     linear: &Matrix2<f32>,
     levels: usize,
     config: &KltConfig,
+    scratch: &mut Scratch,
 ) -> KltTrack {
     let failed = |status| KltTrack {
         position: p0,
@@ -407,11 +731,12 @@ fn track_one(
         return failed(KltStatus::OutOfImage);
     }
     let half = (config.window_px / 2) as i32;
+    // The displacement at the coarsest level used, in that level's pixels.
     let mut d = guess * 0.5f32.powi(levels.saturating_sub(1) as i32);
     for level in (0..levels).rev() {
         let (t_img, j_img) = (&prev.levels[level], &next.levels[level]);
         let p = to_level(p0, level);
-        match refine_level(t_img, j_img, p, d, linear, half, config) {
+        match refine_level(t_img, j_img, p, d, linear, half, config, scratch) {
             LevelResult::Refined(new_d) => d = new_d,
             // Coarse levels may lack room or texture; the finer levels decide.
             LevelResult::TooFewSamples if level > 0 => {}
@@ -431,7 +756,16 @@ fn track_one(
             ..failed(KltStatus::OutOfImage)
         };
     }
-    let residual = mean_residual(&prev.levels[0], j0, p0, q, linear, half);
+    // The scratch holds the level-0 template at `p0` (level 0 was refined last).
+    let unwarped = *linear == Matrix2::identity();
+    let residual = if !scratch.complete {
+        mean_residual(&prev.levels[0], j0, p0, q, linear, half)
+    } else if unwarped && sample_window(j0, q.x, q.y, half, &mut scratch.patch) {
+        abs_difference_sum(&scratch.patch, &scratch.t) / scratch.t.len() as f32
+    } else {
+        sample_window_warped(j0, q.x, q.y, linear, half, &mut scratch.patch);
+        masked_mean_abs_difference(&scratch.patch, &scratch.t)
+    };
     let status = if residual <= config.max_mean_residual {
         KltStatus::Tracked
     } else {
@@ -451,7 +785,10 @@ enum LevelResult {
     Untextured,
 }
 
-/// Gauss–Newton on the displacement `d` of the window around `p` (level coordinates).
+/// Gauss–Newton on the displacement `d` of the window around `p` (level coordinates). The
+/// template and its normal matrix are computed once (inverse-compositional for translation);
+/// each iteration samples the next image's window once.
+#[allow(clippy::too_many_arguments)]
 fn refine_level(
     t_img: &GrayImage,
     j_img: &GrayImage,
@@ -460,49 +797,10 @@ fn refine_level(
     linear: &Matrix2<f32>,
     half: i32,
     config: &KltConfig,
+    scratch: &mut Scratch,
 ) -> LevelResult {
     let side = (2 * half + 1) as usize;
-    // Template samples and gradients; `None` where the window leaves the image.
-    let mut template: Vec<Option<(f32, f32, f32)>> = Vec::with_capacity(side * side);
-    let (mut gxx, mut gxy, mut gyy) = (0.0f32, 0.0f32, 0.0f32);
-    let mut patch = Vec::new();
-    if sample_window(t_img, p.x, p.y, half + 1, &mut patch) {
-        // Fast path: the window and its one-pixel frame are inside the image. Central
-        // differences of the bilinear patch equal bilinear samples of central differences.
-        let stride = side + 2;
-        for j in 0..side {
-            for i in 0..side {
-                let c = (j + 1) * stride + i + 1;
-                let gx = 0.5 * (patch[c + 1] - patch[c - 1]);
-                let gy = 0.5 * (patch[c + stride] - patch[c - stride]);
-                gxx += gx * gx;
-                gxy += gx * gy;
-                gyy += gy * gy;
-                template.push(Some((patch[c], gx, gy)));
-            }
-        }
-    }
-    let slow_template = template.is_empty();
-    for j in (-half..=half).filter(|_| slow_template) {
-        for i in -half..=half {
-            let (x, y) = (p.x + i as f32, p.y + j as f32);
-            let s = (|| {
-                let t = t_img.sample_bilinear(x, y)?;
-                let gx = 0.5
-                    * (t_img.sample_bilinear(x + 1.0, y)? - t_img.sample_bilinear(x - 1.0, y)?);
-                let gy = 0.5
-                    * (t_img.sample_bilinear(x, y + 1.0)? - t_img.sample_bilinear(x, y - 1.0)?);
-                Some((t, gx, gy))
-            })();
-            if let Some((_, gx, gy)) = s {
-                gxx += gx * gx;
-                gxy += gx * gy;
-                gyy += gy * gy;
-            }
-            template.push(s);
-        }
-    }
-    let valid = template.iter().filter(|s| s.is_some()).count();
+    let (valid, [gxx, gxy, gyy]) = scratch.build_template(t_img, p, half);
     if valid * 2 < side * side {
         return LevelResult::TooFewSamples;
     }
@@ -513,33 +811,23 @@ fn refine_level(
     }
     let inv = [gyy / det, -gxy / det, gxx / det];
     let unwarped = *linear == Matrix2::identity();
-    let mut next_patch = Vec::new();
+    let Scratch {
+        t, gx, gy, patch, ..
+    } = scratch;
     for _ in 0..config.max_iterations {
-        let (mut bx, mut by) = (0.0f32, 0.0f32);
-        let fast = unwarped && sample_window(j_img, p.x + d.x, p.y + d.y, half, &mut next_patch);
-        if fast {
-            for (s, &jv) in template.iter().zip(&next_patch) {
-                if let Some((t, gx, gy)) = *s {
-                    let e = jv - t;
-                    bx += gx * e;
-                    by += gy * e;
-                }
+        let (x, y) = (p.x + d.x, p.y + d.y);
+        let (bx, by) = if unwarped && sample_window(j_img, x, y, half, patch) {
+            gradient_error_sums(patch, t, gx, gy)
+        } else {
+            // The window reaches past the border or is deformed: samples are taken one by
+            // one, and those the image does not define are skipped.
+            if unwarped {
+                sample_window_or_nan(j_img, x, y, half, patch);
+            } else {
+                sample_window_warped(j_img, x, y, linear, half, patch);
             }
-        }
-        let mut k = 0;
-        for j in (-half..=half).filter(|_| !fast) {
-            for i in -half..=half {
-                let o = linear * Vector2::new(i as f32, j as f32);
-                if let Some((t, gx, gy)) = template[k]
-                    && let Some(jv) = j_img.sample_bilinear(p.x + d.x + o.x, p.y + d.y + o.y)
-                {
-                    let e = jv - t;
-                    bx += gx * e;
-                    by += gy * e;
-                }
-                k += 1;
-            }
-        }
+            masked_gradient_error_sums(patch, t, gx, gy)
+        };
         let step = Vector2::new(inv[0] * bx + inv[1] * by, inv[1] * bx + inv[2] * by);
         d -= step;
         if !(d.x.is_finite() && d.y.is_finite()) {
@@ -556,10 +844,11 @@ fn refine_level(
 /// `false` (and `out` unspecified) unless the whole window lies where bilinear sampling is
 /// defined. All samples share one fractional offset, so the weights are computed once.
 fn sample_window(image: &GrayImage, x: f32, y: f32, r: i32, out: &mut Vec<f32>) -> bool {
-    if !(x.is_finite() && y.is_finite()) {
+    // Far-off (or non-finite) positions are outside; the bound keeps the integer maths exact.
+    if !(x.abs() < FAR_PX && y.abs() < FAR_PX) {
         return false;
     }
-    let (xf, yf) = (x.floor(), y.floor());
+    let (xf, yf) = (floor(x), floor(y));
     let (fx, fy) = (x - xf, y - yf);
     let (x0, y0) = (xf as i64 - i64::from(r), yf as i64 - i64::from(r));
     let side = 2 * i64::from(r) + 1;
@@ -574,20 +863,124 @@ fn sample_window(image: &GrayImage, x: f32, y: f32, r: i32, out: &mut Vec<f32>) 
         fx * fy,
     );
     let data = image.as_slice();
-    let stride = w as usize;
+    let (stride, side) = (w as usize, side as usize);
+    let (x0, y0) = (x0 as usize, y0 as usize);
     out.clear();
-    for j in 0..side as usize {
-        let top = &data[(y0 as usize + j) * stride + x0 as usize..][..side as usize + 1];
-        let bottom = &data[(y0 as usize + j + 1) * stride + x0 as usize..][..side as usize + 1];
-        for i in 0..side as usize {
-            out.push(w00 * top[i] + w10 * top[i + 1] + w01 * bottom[i] + w11 * bottom[i + 1]);
+    out.resize(side * side, 0.0);
+    for (j, row) in out.chunks_exact_mut(side).enumerate() {
+        let top = &data[(y0 + j) * stride + x0..][..side + 1];
+        let bottom = &data[(y0 + j + 1) * stride + x0..][..side + 1];
+        // Equal-length slices, indexed in step, so the loop compiles to vector lanes.
+        let (a, b) = (&top[..side], &top[1..]);
+        let (c, e) = (&bottom[..side], &bottom[1..]);
+        for i in 0..side {
+            row[i] = w00 * a[i] + w10 * b[i] + w01 * c[i] + w11 * e[i];
         }
     }
     true
 }
 
+/// As [`sample_window`] for a window that may reach past the image: the samples where
+/// bilinear sampling is not defined are NaN (all of them when `(x, y)` is not finite or far
+/// off).
+fn sample_window_or_nan(image: &GrayImage, x: f32, y: f32, r: i32, out: &mut Vec<f32>) {
+    let side = 2 * i64::from(r) + 1;
+    out.clear();
+    out.resize((side * side) as usize, f32::NAN);
+    if !(x.abs() < FAR_PX && y.abs() < FAR_PX) {
+        return;
+    }
+    let (xf, yf) = (floor(x), floor(y));
+    let (fx, fy) = (x - xf, y - yf);
+    let (x0, y0) = (xf as i64 - i64::from(r), yf as i64 - i64::from(r));
+    let (w, h) = (i64::from(image.width()), i64::from(image.height()));
+    // Window column c samples between image columns x0 + c and x0 + c + 1, which must both
+    // exist (the same for rows).
+    let (c_lo, c_hi) = ((-x0).clamp(0, side), (w - 1 - x0).clamp(0, side));
+    let (r_lo, r_hi) = ((-y0).clamp(0, side), (h - 1 - y0).clamp(0, side));
+    if c_lo >= c_hi || r_lo >= r_hi {
+        return;
+    }
+    let (w00, w10, w01, w11) = (
+        (1.0 - fx) * (1.0 - fy),
+        fx * (1.0 - fy),
+        (1.0 - fx) * fy,
+        fx * fy,
+    );
+    let data = image.as_slice();
+    let (stride, side) = (w as usize, side as usize);
+    let (c_lo, c_hi) = (c_lo as usize, c_hi as usize);
+    let n = c_hi - c_lo;
+    // Columns c_lo..c_hi and rows r_lo..r_hi map to image pixels ≥ 0 by construction.
+    let u = (x0 + c_lo as i64) as usize;
+    for j in r_lo as usize..r_hi as usize {
+        let v = (y0 + j as i64) as usize;
+        let top = &data[v * stride + u..][..n + 1];
+        let bottom = &data[(v + 1) * stride + u..][..n + 1];
+        for ((((o, a), b), c), e) in out[j * side + c_lo..j * side + c_hi]
+            .iter_mut()
+            .zip(&top[..n])
+            .zip(&top[1..])
+            .zip(&bottom[..n])
+            .zip(&bottom[1..])
+        {
+            *o = w00 * a + w10 * b + w01 * c + w11 * e;
+        }
+    }
+}
+
+/// Samples of the window deformed by `linear` around `(x, y)`: entry `(i, j)` (row-major,
+/// `i, j` in `−r..=r`) is the bilinear sample at `(x, y) + linear·(i, j)`, or NaN where
+/// bilinear sampling is not defined.
+fn sample_window_warped(
+    image: &GrayImage,
+    x: f32,
+    y: f32,
+    linear: &Matrix2<f32>,
+    r: i32,
+    out: &mut Vec<f32>,
+) {
+    out.clear();
+    let (w, h) = (image.width() as f32, image.height() as f32);
+    let stride = image.width() as usize;
+    let data = image.as_slice();
+    let (ax, ay) = (linear[(0, 0)], linear[(1, 0)]);
+    let (bx, by) = (linear[(0, 1)], linear[(1, 1)]);
+    for j in -r..=r {
+        let (fj, fi0) = (j as f32, -r as f32);
+        for i in 0..2 * r + 1 {
+            let fi = fi0 + i as f32;
+            let (u, v) = (x + ax * fi + bx * fj, y + ay * fi + by * fj);
+            // `u < w − 1` ⇔ the pixel right of floor(u) exists (w is an integer); NaN fails.
+            if !(u >= 0.0 && v >= 0.0 && u < w - 1.0 && v < h - 1.0) {
+                out.push(f32::NAN);
+                continue;
+            }
+            // Non-negative, so truncation is the floor.
+            let (u0, v0) = (u as usize, v as usize);
+            let (fu, fv) = (u - u0 as f32, v - v0 as f32);
+            let k = v0 * stride + u0;
+            let (a, b, c, e) = (data[k], data[k + 1], data[k + stride], data[k + stride + 1]);
+            let top = a + (b - a) * fu;
+            let bottom = c + (e - c) * fu;
+            out.push(top + (bottom - top) * fv);
+        }
+    }
+}
+
+/// Window positions at least this far from the origin, px, are outside any image.
+const FAR_PX: f32 = 1e9;
+
+/// `x.floor()` for window positions (|x| < [`FAR_PX`]), without a libm call (the baseline
+/// x86-64 target has no rounding instruction).
+fn floor(x: f32) -> f32 {
+    let t = x as i64 as f32;
+    if t > x { t - 1.0 } else { t }
+}
+
 /// Mean absolute difference between the window at `p` in `t_img` and at `q` in `j_img`, over
-/// the samples both images define; infinite when none.
+/// the samples both images define; infinite when none. (The general case: windows at the
+/// image border or deformed by `linear`.)
 fn mean_residual(
     t_img: &GrayImage,
     j_img: &GrayImage,
@@ -709,6 +1102,154 @@ mod tests {
         };
         let refused = track_points_guided(&prev_pyramid, &next_pyramid, &[singular], &config);
         assert_eq!(refused.unwrap()[0].status, KltStatus::Untextured);
+    }
+
+    #[test]
+    fn pyramid_levels_equal_blur_then_block_average() {
+        for (w, h) in [
+            (64u32, 48u32),
+            (7, 5),
+            (9, 4),
+            (5, 9),
+            (2, 2),
+            (1, 3),
+            (3, 1),
+        ] {
+            let img = image(w, h, texture);
+            let fused = half_level(&img);
+            let reference = downsample_gray(&smoothed(&img));
+            assert_eq!(
+                (fused.width(), fused.height()),
+                (reference.width(), reference.height())
+            );
+            for (a, b) in fused.as_slice().iter().zip(reference.as_slice()) {
+                assert_eq!(a, b, "{w}×{h}");
+            }
+        }
+        // The same for any number of threads.
+        let img = image(64, 48, texture);
+        let one = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .unwrap()
+            .install(|| half_level(&img));
+        assert_eq!(one.as_slice(), half_level(&img).as_slice());
+    }
+
+    #[test]
+    fn border_windows_match_per_sample_bilinear() {
+        let img = image(40, 30, texture);
+        let mut out = Vec::new();
+        let centres = [
+            (1.3f32, 2.7f32),
+            (38.2, 28.9),
+            (-3.5, 10.25),
+            (20.0, 15.0),
+            (39.5, -0.5),
+            (f32::NAN, 3.0),
+        ];
+        for &(x, y) in &centres {
+            sample_window_or_nan(&img, x, y, 4, &mut out);
+            assert_eq!(out.len(), 81);
+            let mut k = 0;
+            for j in -4..=4 {
+                for i in -4..=4 {
+                    match img.sample_bilinear(x + i as f32, y + j as f32) {
+                        Some(v) => assert!((out[k] - v).abs() < 1e-5, "{x},{y} {i},{j}"),
+                        None => assert!(out[k].is_nan(), "{x},{y} {i},{j}: {}", out[k]),
+                    }
+                    k += 1;
+                }
+            }
+        }
+        // Deformed windows, inside and across the border.
+        let linear = Matrix2::new(0.98f32, -0.17, 0.17, 0.98) * 1.05;
+        for &(x, y) in &centres {
+            sample_window_warped(&img, x, y, &linear, 4, &mut out);
+            assert_eq!(out.len(), 81);
+            let mut k = 0;
+            for j in -4..=4 {
+                for i in -4..=4 {
+                    let o = linear * Vector2::new(i as f32, j as f32);
+                    match img.sample_bilinear(x + o.x, y + o.y) {
+                        Some(v) => assert!((out[k] - v).abs() < 1e-4, "{x},{y} {i},{j}"),
+                        None => assert!(out[k].is_nan(), "{x},{y} {i},{j}: {}", out[k]),
+                    }
+                    k += 1;
+                }
+            }
+        }
+        assert!(!sample_window(&img, 2.0, 15.0, 4, &mut out));
+        assert!(sample_window(&img, 20.0, 15.0, 4, &mut out));
+        assert_eq!(floor(-1.5), -2.0);
+        assert_eq!(floor(-2.0), -2.0);
+        assert_eq!(floor(2.75), 2.0);
+    }
+
+    #[test]
+    fn points_whose_windows_cross_the_border_still_track() {
+        let (dx, dy) = (1.6f32, -0.7f32);
+        let prev = image(160, 120, texture);
+        let next = image(160, 120, |x, y| texture(x - dx, y - dy));
+        // 25 px windows reach past the left, top and right edges at every level.
+        let points = vec![
+            Point2::new(6.0, 60.0),
+            Point2::new(80.0, 5.0),
+            Point2::new(150.0, 70.0),
+        ];
+        let tracks = track_points(
+            &KltPyramid::new(&prev, 3),
+            &KltPyramid::new(&next, 3),
+            &points,
+            &KltConfig::default(),
+        )
+        .unwrap();
+        for (t, p) in tracks.iter().zip(&points) {
+            assert_eq!(t.status, KltStatus::Tracked, "{p:?}: {t:?}");
+            assert!((t.position.x - p.x - dx).abs() < 0.05, "{p:?}: {t:?}");
+            assert!((t.position.y - p.y - dy).abs() < 0.05, "{p:?}: {t:?}");
+        }
+    }
+
+    #[test]
+    fn refinement_from_an_earlier_pass_matches_full_retracking() {
+        // A 4° rotation and 3% zoom about (80, 60), plus a shift.
+        let (c, s) = (
+            1.03 * 4f32.to_radians().cos(),
+            1.03 * 4f32.to_radians().sin(),
+        );
+        let warp = |x: f32, y: f32| {
+            let (u, v) = (x - 80.0, y - 60.0);
+            (80.0 + c * u - s * v + 2.3, 60.0 + s * u + c * v - 1.1)
+        };
+        let prev = image(160, 120, texture);
+        // next(warp(p)) = prev(p): invert the similarity per pixel.
+        let next = image(160, 120, |x, y| {
+            let (u, v) = (x - 80.0 - 2.3, y - 60.0 + 1.1);
+            let det = c * c + s * s;
+            texture(80.0 + (c * u + s * v) / det, 60.0 + (-s * u + c * v) / det)
+        });
+        let points: Vec<_> = (0..12)
+            .map(|k| Point2::new(50.0 + (k % 4) as f32 * 20.0, 40.0 + (k / 4) as f32 * 20.0))
+            .collect();
+        let (pp, np) = (KltPyramid::new(&prev, 3), KltPyramid::new(&next, 3));
+        let config = KltConfig::default();
+        let linear = Matrix2::new(c, -s, s, c);
+        let first = track_points(&pp, &np, &points, &config).unwrap();
+        let full = track_points_warped(&pp, &np, &points, &linear, &config).unwrap();
+        let warm =
+            track_points_warped_from(&pp, &np, &points, Some(&first), &linear, &config).unwrap();
+        for ((p, f), w) in points.iter().zip(&full).zip(&warm) {
+            let (tx, ty) = warp(p.x, p.y);
+            assert_eq!(f.status, KltStatus::Tracked, "{p:?}: {f:?}");
+            assert_eq!(w.status, KltStatus::Tracked, "{p:?}: {w:?}");
+            assert!((w.position - f.position).norm() < 0.02, "{w:?} vs {f:?}");
+            assert!((w.position.x - tx).abs() < 0.05 && (w.position.y - ty).abs() < 0.05);
+        }
+        assert!(matches!(
+            track_points_warped_from(&pp, &np, &points, Some(&first[1..]), &linear, &config),
+            Err(FeatureError::SizeMismatch { .. })
+        ));
     }
 
     #[test]

@@ -49,9 +49,9 @@ mod similarity;
 pub use corners::{Corner, CornerConfig, CornerRegion, CornerScore, PixelRect, detect_corners};
 pub use klt::{
     GuidedPoint, KltConfig, KltPyramid, KltStatus, KltTrack, track_points, track_points_guided,
-    track_points_warped,
+    track_points_warped, track_points_warped_from,
 };
-pub use motion::{MotionConfig, track_similarity};
+pub use motion::{MotionConfig, similarity_from_tracks, track_similarity};
 pub use similarity::{
     Similarity2, SimilarityFit, SimilarityFitConfig, fit_similarity_least_squares,
     fit_similarity_robust,
