@@ -211,7 +211,8 @@ impl MappingSession {
                 world_from_camera_truth: *world_from_camera_truth,
                 odometry_covariance: tracked.keyframe_covariance,
             });
-        } else if self.between_stride > 0
+        } else if !tracked.fell_back
+            && self.between_stride > 0
             && self.frames_mapped.is_multiple_of(self.between_stride)
             && !self.stored.is_empty()
         {

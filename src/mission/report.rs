@@ -31,6 +31,9 @@ pub struct TargetReport {
     pub frames_mapped: usize,
     /// Keyframes in its bundle adjustment.
     pub keyframes: usize,
+    /// Whether its point set converged before mapping (false: mapped from a compact but
+    /// unconverged point set, see `map_unconverged_targets`).
+    pub localization_converged: bool,
     /// Whether the low, level base ring was flown (it is dropped when it cannot be cleared).
     pub base_ring_flown: bool,
     /// How the mapping rings were changed to keep clear of terrain and rocks.

@@ -344,9 +344,19 @@ impl<'a> Mission<'a> {
                         self.resume_search(timings)?;
                     }
                     Some(state) if state.converged => self.start_mapping(id, timings)?,
-                    Some(_) if self.motion.trajectory_done() => {
-                        self.set_status(id, TargetStatus::Unconverged);
-                        self.resume_search(timings)?;
+                    Some(state) if self.motion.trajectory_done() => {
+                        if self.inputs.config.map_unconverged_targets
+                            && state.ready_for_fine_localization
+                        {
+                            tracing::info!(
+                                "target {id}: the fine-localization circle ended unconverged; \
+                                 mapping it from its compact point set"
+                            );
+                            self.start_mapping(id, timings)?;
+                        } else {
+                            self.set_status(id, TargetStatus::Unconverged);
+                            self.resume_search(timings)?;
+                        }
                     }
                     Some(_) => {}
                 }
@@ -619,6 +629,7 @@ impl<'a> Mission<'a> {
         });
         timings.planning_s += clock.elapsed().as_secs_f64();
         if let Some(m) = self.targets.get_mut(&id) {
+            m.report.localization_converged = state.converged;
             m.report.center = state.center.coords.into();
             m.report.cylinder_radius_m = cylinder.radius_m;
             m.report.cylinder_z_bottom_m = cylinder.z_bottom_m;

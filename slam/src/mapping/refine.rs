@@ -69,6 +69,12 @@ pub struct RefineConfig {
     /// Also fuse and mesh the keyframes at their odometry poses (for before/after comparisons).
     /// Default false.
     pub mesh_before: bool,
+    /// Frames between keyframes k and k + 1 are re-integrated only when the adjustment's
+    /// corrections of the two keyframes differ by at most this translation, metres. Default
+    /// 0.005 (half a voxel): a larger change means the odometry drifted within the stretch.
+    pub between_max_correction_change_m: f64,
+    /// ... and at most this rotation, degrees. Default 0.25.
+    pub between_max_correction_change_deg: f64,
 }
 
 impl Default for RefineConfig {
@@ -91,6 +97,8 @@ impl Default for RefineConfig {
             tsdf: TsdfConfig::default(),
             meshing: MeshingConfig::default(),
             mesh_before: false,
+            between_max_correction_change_m: 0.005,
+            between_max_correction_change_deg: 0.25,
         }
     }
 }
@@ -135,9 +143,14 @@ impl KeyframeSet {
     /// # Errors
     /// [`MappingError::InvalidInput`] when `keyframe_poses` does not match the keyframes or a
     /// frame between names a keyframe that does not exist.
+    ///
+    /// A frame between keyframes k and k + 1 is left out when their corrections disagree by
+    /// more than `tolerance` (translation metres, rotation radians): the odometry drifted or
+    /// failed within that stretch, so its poses there are not worth fusing.
     pub fn fusion_order(
         &self,
         keyframe_poses: &[Isometry3<f64>],
+        tolerance: (f64, f64),
     ) -> Result<Vec<(&RgbdFrame, Isometry3<f64>)>, MappingError> {
         if keyframe_poses.len() != self.frames.len()
             || self.world_from_camera_odometry.len() != self.frames.len()
@@ -150,11 +163,22 @@ impl KeyframeSet {
         }
         let mut order = Vec::with_capacity(self.frames.len() + self.between_frames.len());
         let mut between = self.between_frames.iter().peekable();
+        let corrections: Vec<Isometry3<f64>> = keyframe_poses
+            .iter()
+            .zip(&self.world_from_camera_odometry)
+            .map(|(refined, odometry)| refined * odometry.inverse())
+            .collect();
         for (k, (frame, pose)) in self.frames.iter().zip(keyframe_poses).enumerate() {
             order.push((frame, *pose));
-            let correction = pose * self.world_from_camera_odometry[k].inverse();
+            let consistent = corrections.get(k + 1).is_none_or(|next| {
+                let change = corrections[k].inverse() * next;
+                change.translation.vector.norm() <= tolerance.0
+                    && change.rotation.angle() <= tolerance.1
+            });
             while let Some(b) = between.next_if(|b| b.keyframe == k) {
-                order.push((&b.frame, correction * b.world_from_camera_odometry));
+                if consistent {
+                    order.push((&b.frame, corrections[k] * b.world_from_camera_odometry));
+                }
             }
         }
         if let Some(b) = between.next() {
@@ -336,15 +360,23 @@ pub fn refine_keyframes(
     }
     let ba_ms = started.elapsed().as_secs_f64() * 1e3;
 
+    let tolerance = (
+        config.between_max_correction_change_m,
+        config.between_max_correction_change_deg.to_radians(),
+    );
     let mesh_before = if config.mesh_before {
-        let order = keyframes.fusion_order(&keyframes.world_from_camera_odometry)?;
+        let order = keyframes.fusion_order(&keyframes.world_from_camera_odometry, tolerance)?;
         let volume = fuse_in_order(camera, &order, &config.tsdf)?;
         Some(extract_mesh(&volume, &config.meshing))
     } else {
         None
     };
     let started = Instant::now();
-    let volume = fuse_in_order(camera, &keyframes.fusion_order(&poses)?, &config.tsdf)?;
+    let volume = fuse_in_order(
+        camera,
+        &keyframes.fusion_order(&poses, tolerance)?,
+        &config.tsdf,
+    )?;
     let reintegrate_ms = started.elapsed().as_secs_f64() * 1e3;
     let started = Instant::now();
     let mesh = extract_mesh(&volume, &config.meshing);
@@ -489,7 +521,7 @@ mod tests {
         };
         // The adjustment moves keyframe 0 by 2 cm and turns keyframe 1 by 0.01 rad.
         let refined = vec![at(0.02, 0.0), at(1.0, 0.31)];
-        let order = set.fusion_order(&refined).unwrap();
+        let order = set.fusion_order(&refined, (1.0, 1.0)).unwrap();
         let stamps: Vec<f64> = order.iter().map(|(f, _)| f.timestamp_s).collect();
         assert_eq!(stamps, vec![0.0, 0.5, 1.0, 1.5, 1.6]);
         assert_eq!(order[0].1, refined[0]);
@@ -506,7 +538,12 @@ mod tests {
 
         let mut bad = set.clone();
         bad.between_frames.push(between(2, 2.0, at(2.0, 0.0)));
-        assert!(bad.fusion_order(&refined).is_err());
-        assert!(set.fusion_order(&refined[..1]).is_err());
+        assert!(bad.fusion_order(&refined, (1.0, 1.0)).is_err());
+        assert!(set.fusion_order(&refined[..1], (1.0, 1.0)).is_err());
+        // The two corrections differ by 2 cm and 0.01 rad: with a tighter tolerance the frame
+        // between them is left out; the frames after the last keyframe stay.
+        let strict = set.fusion_order(&refined, (0.005, 1.0)).unwrap();
+        let stamps: Vec<f64> = strict.iter().map(|(f, _)| f.timestamp_s).collect();
+        assert_eq!(stamps, vec![0.0, 1.0, 1.5, 1.6]);
     }
 }
