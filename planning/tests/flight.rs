@@ -12,15 +12,7 @@ fn rings_trajectory() -> (Environment, RingPlan, Trajectory) {
     let cfg = PlanningConfig::default();
     let cylinder = VerticalCylinder::bounding(&points).unwrap();
     let start = Waypoint::new(Point3::new(8.0, 3.0, 5.0), 0.0);
-    let rings = plan_mapping_rings_clear(
-        &cylinder,
-        &start,
-        &cfg.camera,
-        &cfg.mapping,
-        &env,
-        &cfg.clearance,
-    )
-    .unwrap();
+    let rings = common::plan_rings(&cylinder, &start, &env, &cfg).unwrap();
     let (traj, report, _) = plan_clear_trajectory(
         &rings.path,
         &StartState::default(),

@@ -170,15 +170,7 @@ fn ring_on_a_slope_is_slid_out_and_keeps_coverage() {
         !env.check_path(&unrepaired.path, &cfg.clearance).is_clear(),
         "fixture must violate"
     );
-    let plan = plan_mapping_rings_clear(
-        &cyl,
-        &start,
-        &cfg.camera,
-        &cfg.mapping,
-        &env,
-        &cfg.clearance,
-    )
-    .unwrap();
+    let plan = common::plan_rings(&cyl, &start, &env, &cfg).unwrap();
     println!("repairs: {:?}", plan.repairs);
     assert!(!plan.repairs.is_empty());
     assert!(plan.clearance.unwrap().is_clear());
@@ -216,15 +208,7 @@ fn blocked_ring_is_rejected_with_a_reason() {
     let cfg = PlanningConfig::default();
     let cyl = VerticalCylinder::new(0.0, 0.0, 1.0, 0.0, 2.0).unwrap();
     let start = Waypoint::new(Point3::new(-10.0, 0.0, 10.0), 0.0);
-    let err = plan_mapping_rings_clear(
-        &cyl,
-        &start,
-        &cfg.camera,
-        &cfg.mapping,
-        &env,
-        &cfg.clearance,
-    )
-    .unwrap_err();
+    let err = common::plan_rings(&cyl, &start, &env, &cfg).unwrap_err();
     println!("{err}");
     match err {
         PlanError::Clearance {
@@ -352,15 +336,7 @@ fn bad_input_gives_clear_errors() {
 
     // Target below the terrain.
     let buried = VerticalCylinder::new(0.0, 0.0, 1.0, 2.0, 4.0).unwrap();
-    let err = plan_mapping_rings_clear(
-        &buried,
-        &start,
-        &cfg.camera,
-        &cfg.mapping,
-        &env,
-        &cfg.clearance,
-    )
-    .unwrap_err();
+    let err = common::plan_rings(&buried, &start, &env, &cfg).unwrap_err();
     assert!(matches!(err, PlanError::TargetBelowTerrain { .. }), "{err}");
     assert!(err.to_string().contains("below the terrain"), "{err}");
     let pts: Vec<Point3<f64>> = (0..30)
@@ -450,15 +426,7 @@ fn base_ring_too_close_is_widened_level() {
     let cfg = PlanningConfig::default();
     let cyl = VerticalCylinder::new(0.0, 0.0, 1.0, 0.0, 2.5).unwrap();
     let start = Waypoint::new(Point3::new(-10.0, 0.0, 10.0), 0.0);
-    let plan = plan_mapping_rings_clear(
-        &cyl,
-        &start,
-        &cfg.camera,
-        &cfg.mapping,
-        &wide_rock_env(),
-        &cfg.clearance,
-    )
-    .unwrap();
+    let plan = common::plan_rings(&cyl, &start, &wide_rock_env(), &cfg).unwrap();
     let base = plan.rings[0];
     assert_eq!(base.camera_pitch_down_deg, 20.0);
     assert!(
@@ -482,15 +450,7 @@ fn blocked_base_ring_is_dropped_and_the_paper_rings_are_flown() {
     cfg.mapping.base_ring.max_raise_m = 0.0;
     let cyl = VerticalCylinder::new(0.0, 0.0, 1.0, 0.0, 2.5).unwrap();
     let start = Waypoint::new(Point3::new(-10.0, 0.0, 10.0), 0.0);
-    let plan = plan_mapping_rings_clear(
-        &cyl,
-        &start,
-        &cfg.camera,
-        &cfg.mapping,
-        &wide_rock_env(),
-        &cfg.clearance,
-    )
-    .unwrap();
+    let plan = common::plan_rings(&cyl, &start, &wide_rock_env(), &cfg).unwrap();
     assert!(plan.rings.iter().all(|r| r.camera_pitch_down_deg == 55.0));
     match &plan.repairs[0] {
         Repair::DroppedRing { ring: 0, reason } => {
@@ -510,15 +470,7 @@ fn base_ring_on_a_scarp_follows_the_terrain() {
     let cfg = PlanningConfig::default();
     let cyl = VerticalCylinder::new(0.0, 0.0, 0.8, 0.0, 2.5).unwrap();
     let start = Waypoint::new(Point3::new(-8.0, 0.0, 10.0), 0.0);
-    let plan = plan_mapping_rings_clear(
-        &cyl,
-        &start,
-        &cfg.camera,
-        &cfg.mapping,
-        &env,
-        &cfg.clearance,
-    )
-    .unwrap();
+    let plan = common::plan_rings(&cyl, &start, &env, &cfg).unwrap();
     println!("repairs: {:?}", plan.repairs);
     assert!(plan.rings[0].follows_terrain);
     let base = &plan.path.waypoints[plan.ring_waypoints[0].clone()];

@@ -13,15 +13,7 @@ fn top_and_side_views_are_written() {
     let cfg = PlanningConfig::default();
     let cylinder = VerticalCylinder::bounding(&points).unwrap();
     let start = Waypoint::new(Point3::new(8.0, 3.0, 5.0), 0.0);
-    let rings = plan_mapping_rings_clear(
-        &cylinder,
-        &start,
-        &cfg.camera,
-        &cfg.mapping,
-        &env,
-        &cfg.clearance,
-    )
-    .unwrap();
+    let rings = common::plan_rings(&cylinder, &start, &env, &cfg).unwrap();
     let traj = plan_min_snap(&rings.path, &StartState::default(), &cfg.min_snap).unwrap();
     let flown = fly_trajectory(&traj, &env, &cfg.flight).unwrap();
     let scene = PlotScene {

@@ -416,24 +416,25 @@ pub(crate) fn evaluate(
     let cut = cut_above(rock, h)?;
     let integrals = mass::integrate(&cut.solid)?;
     let mass = MassProperties::from_integrals(&integrals, config.density_kg_m3);
+    // The rock's base clipped by what supports it (unclipped when either has no area).
+    let clipped_base = |lower: &[Point2<f64>]| {
+        let upper = rocking::convex_hull(&contact::points_above(&cut.solid, h, band_m));
+        if lower.len() >= 3 && upper.len() >= 3 {
+            rocking::clip_convex(&upper, lower)
+        } else {
+            upper
+        }
+    };
     let (hull, contact_height) = match support {
         Support::Exact(hull) => (hull.to_vec(), plane),
-        Support::Below(_) | Support::Fixed(_) => {
-            let upper = rocking::convex_hull(&contact::points_above(&cut.solid, h, band_m));
-            let lower = match support {
-                Support::Below(full) if full.z_range().is_some_and(|(lo, _)| lo < h) => {
-                    rocking::convex_hull(&contact::points_below(full, h, band_m, false))
-                }
-                Support::Fixed(hull) => hull.to_vec(),
-                _ => Vec::new(),
-            };
-            let hull = if lower.len() >= 3 && upper.len() >= 3 {
-                rocking::clip_convex(&upper, &lower)
-            } else {
-                upper
-            };
-            (hull, h)
-        }
+        Support::Fixed(hull) => (clipped_base(hull), h),
+        Support::Below(full) if full.z_range().is_some_and(|(lo, _)| lo < h) => (
+            clipped_base(&rocking::convex_hull(&contact::points_below(
+                full, h, band_m, false,
+            ))),
+            h,
+        ),
+        Support::Below(_) => (clipped_base(&[]), h),
     };
     let com = mass.center_of_mass;
     let min = rocking::minimum_support(&hull, &com.xy()).ok_or_else(|| {
@@ -494,7 +495,7 @@ pub fn analyze_detailed(
         _ => None,
     };
     // The support polygon from a pedestal mesh or a given contact polygon (levelled xy).
-    let (h, method, pedestal_hull) = match contact {
+    let (h, method, given_hull) = match contact {
         ContactSpec::Auto => {
             let neck = contact::find_neck(
                 &solid,
@@ -553,12 +554,12 @@ pub fn analyze_detailed(
         }
     };
 
-    let support = match &pedestal_hull {
-        Some(hull) if method == ContactMethod::Polygon => Support::Exact(hull),
-        Some(hull) => Support::Fixed(hull),
-        None => Support::Below(&solid),
+    let given_support = match &given_hull {
+        Some(hull) if method == ContactMethod::Polygon => SampleSupport::Exact(hull),
+        Some(hull) => SampleSupport::Fixed(hull),
+        None => SampleSupport::SelfBelow,
     };
-    let eval = evaluate(&solid, h, &support, band, config)?;
+    let eval = evaluate(&solid, h, &given_support.of(&solid), band, config)?;
     let h = eval.contact_height;
     if eval.min.distance_m < 0.0 {
         return Err(FragilityError::ComOutsideContact {
@@ -604,12 +605,7 @@ pub fn analyze_detailed(
     let width = eval.min.distance_m + opposite;
 
     // Uncertainty.
-    let sample_support = match &pedestal_hull {
-        Some(hull) if method == ContactMethod::Polygon => SampleSupport::Exact(hull),
-        Some(hull) => SampleSupport::Fixed(hull),
-        None => SampleSupport::SelfBelow,
-    };
-    let uncertainty = alpha_min_spread(&solid, h, sample_support, config);
+    let uncertainty = alpha_min_spread(&solid, h, given_support, config);
 
     let to_input = |p: Point3<f64>| -> [f64; 3] { (input_from_levelled * p).coords.into() };
     let r = input_from_levelled.matrix();

@@ -26,11 +26,10 @@ use std::collections::HashMap;
 
 use nalgebra::{Point2, Point3};
 use scarp_slam::TriangleMesh;
-use scarp_slam::geometry::{convex_hull_2d, polygon_signed_area};
-
-use super::topology::weld_key;
+use scarp_slam::geometry::{convex_hull_2d, polygon_centroid, polygon_signed_area};
 use serde::{Deserialize, Serialize};
 
+use super::topology::weld_key;
 use super::{ContactSpec, FragilityAnalysis, FragilityConfig, FragilityError, analyze_detailed};
 
 /// Slab thickness of the extent profile, metres.
@@ -215,12 +214,17 @@ fn slab_extent(mesh: &TriangleMesh, z: f64) -> Option<(f64, Point2<f64>)> {
         .iter()
         .fold(Point2::origin(), |acc, p| acc + p.coords)
         / points.len() as f64;
-    let mut filled = [false; SECTORS];
-    for p in &points {
-        filled[sector_of(p, &mean, SECTORS)] = true;
-    }
-    (filled.iter().filter(|&&f| f).count() >= MIN_SECTORS)
+    (sectors_filled(points.iter().map(|p| sector_of(p, &mean, SECTORS))) >= MIN_SECTORS)
         .then(|| (polygon_signed_area(&convex_hull_2d(&points)).abs(), mean))
+}
+
+/// How many distinct sectors (of [`SECTORS`]) appear in `sectors`.
+fn sectors_filled(sectors: impl Iterator<Item = usize>) -> usize {
+    let mut filled = [false; SECTORS];
+    for s in sectors {
+        filled[s] = true;
+    }
+    filled.iter().filter(|&&f| f).count()
 }
 
 /// The azimuth sector (of `sectors`) of `p` around `axis_xy`.
@@ -264,13 +268,11 @@ fn support_plane_height(
         .ceil() as usize;
     let level = (0..bins).find_map(|i| {
         let z = neck_z + config.support_search_above_m - (i as f64 + 0.5) * SUPPORT_BIN_M;
-        let mut filled = [false; SECTORS];
-        for &(fz, _, sector) in &faces {
-            if (fz - z).abs() <= 0.5 * SUPPORT_BIN_M {
-                filled[sector] = true;
-            }
-        }
-        (filled.iter().filter(|&&f| f).count() >= SUPPORT_MIN_SECTORS).then_some(z)
+        let at_level = faces
+            .iter()
+            .filter(|(fz, _, _)| (fz - z).abs() <= 0.5 * SUPPORT_BIN_M)
+            .map(|&(_, _, sector)| sector);
+        (sectors_filled(at_level) >= SUPPORT_MIN_SECTORS).then_some(z)
     })?;
     let (sum, area) = faces
         .iter()
@@ -368,19 +370,6 @@ fn extrapolated_contact(
         )));
     }
     Ok(hull)
-}
-
-/// The area centroid of a simple polygon; `None` when it has no area.
-fn polygon_centroid(polygon: &[Point2<f64>]) -> Option<Point2<f64>> {
-    let area = polygon_signed_area(polygon);
-    if polygon.len() < 3 || area.abs() <= 0.0 {
-        return None;
-    }
-    let sum = (0..polygon.len()).fold(nalgebra::Vector2::zeros(), |acc, i| {
-        let (a, b) = (polygon[i], polygon[(i + 1) % polygon.len()]);
-        acc + (a.coords + b.coords) * (a.x * b.y - b.x * a.y)
-    });
-    Some(Point2::from(sum / (6.0 * area)))
 }
 
 /// Least-squares line y = a + b·x through `points` (x, y); `None` when the x are all equal.
@@ -701,15 +690,27 @@ mod tests {
             let t = ((z - k[0].0) / (k[1].0 - k[0].0)).clamp(0.0, 1.0);
             k[0].1 + t * (k[1].1 - k[0].1)
         };
-        let rings: Vec<(Vec<(f64, f64)>, f64)> = (0..=180)
+        let profile: Vec<(f64, f64)> = (0..=180)
             .map(|i| {
                 let z = f64::from(i) * 0.01;
-                (regular_ring(32, radius_at(z), 0.0), z)
+                (radius_at(z), z)
             })
             .collect();
+        without_bottom_cap(revolved(&profile, 32))
+    }
+
+    /// The closed solid of revolution through `(radius, z)` rings (`sides`-gons), z rising.
+    fn revolved(profile: &[(f64, f64)], sides: usize) -> TriangleMesh {
+        let rings: Vec<(Vec<(f64, f64)>, f64)> = profile
+            .iter()
+            .map(|&(r, z)| (regular_ring(sides, r, 0.0), z))
+            .collect();
         let refs: Vec<(&[(f64, f64)], f64)> = rings.iter().map(|(r, z)| (&r[..], *z)).collect();
-        let mut mesh = to_mesh(&loft_solid(&refs));
-        // Open it: drop the bottom cap (faces whose vertices all sit at z = 0).
+        to_mesh(&loft_solid(&refs))
+    }
+
+    /// `mesh` opened like a scan: without the faces whose vertices all sit at z = 0.
+    fn without_bottom_cap(mut mesh: TriangleMesh) -> TriangleMesh {
         mesh.faces
             .retain(|f| f.iter().any(|&v| mesh.positions[v as usize].z > 1e-6));
         mesh
@@ -755,24 +756,15 @@ mod tests {
             .map(|i| plane + 0.015 + 0.01 * f64::from(i))
             .filter(|&z| z < centre_z + c - 0.005)
             .collect();
+        let rock = rock_heights.iter().map(|&z| (rock_r(z), z));
         let mut profile = vec![(0.8, 0.0), (0.4, plane), (rock_r(plane + 0.015), plane)];
-        profile.extend(rock_heights.iter().map(|&z| (rock_r(z), z)));
-        let rings: Vec<(Vec<(f64, f64)>, f64)> = profile
-            .iter()
-            .map(|&(r, z)| (regular_ring(48, r, 0.0), z))
-            .collect();
-        let refs: Vec<(&[(f64, f64)], f64)> = rings.iter().map(|(r, z)| (&r[..], *z)).collect();
-        let mut scan = to_mesh(&loft_solid(&refs));
-        scan.faces
-            .retain(|f| f.iter().any(|&v| scan.positions[v as usize].z > 1e-6));
+        profile.extend(rock.clone());
         let mut truth_profile = vec![(rock_r(plane), plane)];
-        truth_profile.extend(rock_heights.iter().map(|&z| (rock_r(z), z)));
-        let rings: Vec<(Vec<(f64, f64)>, f64)> = truth_profile
-            .iter()
-            .map(|&(r, z)| (regular_ring(48, r, 0.0), z))
-            .collect();
-        let refs: Vec<(&[(f64, f64)], f64)> = rings.iter().map(|(r, z)| (&r[..], *z)).collect();
-        (scan, to_mesh(&loft_solid(&refs)))
+        truth_profile.extend(rock);
+        (
+            without_bottom_cap(revolved(&profile, 48)),
+            revolved(&truth_profile, 48),
+        )
     }
 
     #[test]

@@ -76,7 +76,7 @@ fn sample_seed(seed: u64, index: u64) -> u64 {
     z ^ (z >> 31)
 }
 
-/// Where the support of a perturbed sample comes from.
+/// Where the support of the rock (and of each perturbed sample) comes from.
 pub(crate) enum SampleSupport<'a> {
     /// The perturbed mesh itself below the contact (automatic or given height).
     SelfBelow,
@@ -84,6 +84,20 @@ pub(crate) enum SampleSupport<'a> {
     Fixed(&'a [Point2<f64>]),
     /// A given contact polygon.
     Exact(&'a [Point2<f64>]),
+}
+
+impl<'a> SampleSupport<'a> {
+    /// The support of `solid` (the unperturbed rock or a perturbed sample of it).
+    pub(crate) fn of<'s>(&self, solid: &'s Solid) -> Support<'s>
+    where
+        'a: 's,
+    {
+        match *self {
+            SampleSupport::SelfBelow => Support::Below(solid),
+            SampleSupport::Fixed(hull) => Support::Fixed(hull),
+            SampleSupport::Exact(hull) => Support::Exact(hull),
+        }
+    }
 }
 
 /// Runs the perturbed analyses of `rock` around `contact_height_m` and summarises α_min.
@@ -116,14 +130,15 @@ pub(crate) fn alpha_min_spread(
                     .collect(),
                 faces: rock.faces.clone(),
             };
-            let support = match support {
-                SampleSupport::SelfBelow => Support::Below(&noisy),
-                SampleSupport::Fixed(hull) => Support::Fixed(hull),
-                SampleSupport::Exact(hull) => Support::Exact(hull),
-            };
-            evaluate(&noisy, contact_height_m + dh, &support, band, config)
-                .ok()
-                .map(|e| e.alpha_min_rad.to_degrees())
+            evaluate(
+                &noisy,
+                contact_height_m + dh,
+                &support.of(&noisy),
+                band,
+                config,
+            )
+            .ok()
+            .map(|e| e.alpha_min_rad.to_degrees())
         })
         .collect();
     let ok: Vec<f64> = results.iter().flatten().copied().collect();

@@ -373,7 +373,8 @@ pub fn finish_target(
 
     let clock = Instant::now();
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    // The scan is open (ROI cut, unseen parts): separate the rock at its neck and close it.
+    // The scan is open (ROI cut, unseen parts): cut the rock off above its support, extrapolate
+    // its contact from the basal profile, close it and analyse it.
     let fragility = analyze_scan(&mesh, &config.fragility).map(|(_, analysis)| analysis);
     let mut mapped = complete;
     match &fragility {

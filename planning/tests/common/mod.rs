@@ -55,3 +55,21 @@ pub fn two_metre_rock() -> (Environment, Vec<Point3<f64>>) {
     let terrain = Heightfield::flat(-40.0, -40.0, 1.0, 81, 81, 0.0).unwrap();
     (Environment::new(Some(terrain), &[rock]).unwrap(), points)
 }
+
+/// The mapping rings of `cylinder` from `start`, planned clear of `env` with `cfg`'s camera,
+/// ring and clearance settings.
+pub fn plan_rings(
+    cylinder: &VerticalCylinder,
+    start: &Waypoint,
+    env: &Environment,
+    cfg: &PlanningConfig,
+) -> Result<RingPlan, PlanError> {
+    plan_mapping_rings_clear(
+        cylinder,
+        start,
+        &cfg.camera,
+        &cfg.mapping,
+        env,
+        &cfg.clearance,
+    )
+}

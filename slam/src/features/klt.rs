@@ -840,6 +840,18 @@ fn refine_level(
     LevelResult::Refined(d)
 }
 
+/// The weights of the four neighbours (top-left, top-right, bottom-left, bottom-right) of a
+/// sample at fractional offset `(fx, fy)` from the top-left one.
+#[inline]
+fn bilinear_weights(fx: f32, fy: f32) -> (f32, f32, f32, f32) {
+    (
+        (1.0 - fx) * (1.0 - fy),
+        fx * (1.0 - fy),
+        (1.0 - fx) * fy,
+        fx * fy,
+    )
+}
+
 /// Bilinear samples of the `(2r + 1)²` window centred at `(x, y)`, row-major, into `out`;
 /// `false` (and `out` unspecified) unless the whole window lies where bilinear sampling is
 /// defined. All samples share one fractional offset, so the weights are computed once.
@@ -856,12 +868,7 @@ fn sample_window(image: &GrayImage, x: f32, y: f32, r: i32, out: &mut Vec<f32>) 
     if x0 < 0 || y0 < 0 || x0 + side >= w || y0 + side >= h {
         return false;
     }
-    let (w00, w10, w01, w11) = (
-        (1.0 - fx) * (1.0 - fy),
-        fx * (1.0 - fy),
-        (1.0 - fx) * fy,
-        fx * fy,
-    );
+    let (w00, w10, w01, w11) = bilinear_weights(fx, fy);
     let data = image.as_slice();
     let (stride, side) = (w as usize, side as usize);
     let (x0, y0) = (x0 as usize, y0 as usize);
@@ -901,12 +908,7 @@ fn sample_window_or_nan(image: &GrayImage, x: f32, y: f32, r: i32, out: &mut Vec
     if c_lo >= c_hi || r_lo >= r_hi {
         return;
     }
-    let (w00, w10, w01, w11) = (
-        (1.0 - fx) * (1.0 - fy),
-        fx * (1.0 - fy),
-        (1.0 - fx) * fy,
-        fx * fy,
-    );
+    let (w00, w10, w01, w11) = bilinear_weights(fx, fy);
     let data = image.as_slice();
     let (stride, side) = (w as usize, side as usize);
     let (c_lo, c_hi) = (c_lo as usize, c_hi as usize);

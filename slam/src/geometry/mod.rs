@@ -8,7 +8,7 @@ mod triangle;
 
 pub use camera::PinholeCamera;
 pub use floor::{floor_i32, floor_i64};
-pub use polygon::{convex_hull_2d, polygon_signed_area};
+pub use polygon::{convex_hull_2d, polygon_centroid, polygon_signed_area};
 pub use transform::{
     check_finite_isometry, isometry_from_tum, look_at, quaternion_from_xyzw, rotation_angle_deg,
     tum_from_isometry, yaw_pitch_roll_from_rotation,

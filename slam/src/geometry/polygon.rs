@@ -1,4 +1,4 @@
-//! Planar polygons: convex hulls and areas.
+//! Planar polygons: convex hulls, areas and centroids.
 
 use nalgebra::Point2;
 
@@ -50,6 +50,20 @@ pub fn polygon_signed_area(polygon: &[Point2<f64>]) -> f64 {
         / 2.0
 }
 
+/// The area centroid of a simple polygon; `None` for fewer than three points or no area.
+pub fn polygon_centroid(polygon: &[Point2<f64>]) -> Option<Point2<f64>> {
+    let area = polygon_signed_area(polygon);
+    if polygon.len() < 3 || area == 0.0 || !area.is_finite() {
+        return None;
+    }
+    let n = polygon.len();
+    let sum = (0..n).fold(nalgebra::Vector2::zeros(), |acc, i| {
+        let (a, b) = (polygon[i], polygon[(i + 1) % n]);
+        acc + (a.coords + b.coords) * (a.x * b.y - b.x * a.y)
+    });
+    Some(Point2::from(sum / (6.0 * area)))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -71,6 +85,33 @@ mod tests {
         let hull = convex_hull_2d(&pts);
         assert_eq!(hull.len(), 4);
         assert!((polygon_signed_area(&hull) - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn centroid_is_the_area_centroid_not_the_vertex_mean() {
+        // An L of two unit squares: the vertex mean leans to the corner, the area centroid not.
+        let l: Vec<_> = [
+            (0.0, 0.0),
+            (2.0, 0.0),
+            (2.0, 1.0),
+            (1.0, 1.0),
+            (1.0, 2.0),
+            (0.0, 2.0),
+        ]
+        .iter()
+        .map(|&(x, y)| Point2::new(x, y))
+        .collect();
+        let c = polygon_centroid(&l).unwrap();
+        assert!(
+            (c.x - 5.0 / 6.0).abs() < 1e-12 && (c.y - 5.0 / 6.0).abs() < 1e-12,
+            "{c}"
+        );
+        let line = [
+            Point2::new(0.0, 0.0),
+            Point2::new(1.0, 1.0),
+            Point2::new(2.0, 2.0),
+        ];
+        assert_eq!(polygon_centroid(&line), None);
     }
 
     proptest! {

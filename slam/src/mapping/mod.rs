@@ -24,9 +24,7 @@ use crate::odometry::OdometryError;
 use crate::tsdf::TsdfError;
 
 pub use landmarks::{LandmarkConfig, LandmarkView, Landmarks, track_landmarks};
-pub use refine::{
-    BetweenFrame, KeyframeSet, RefineConfig, RefinedMap, fuse_and_mesh, refine_keyframes,
-};
+pub use refine::{BetweenFrame, KeyframeSet, RefineConfig, RefinedMap, refine_keyframes};
 pub use residuals::{ReprojectionStats, reprojection_stats, triangulate_point};
 pub use tracker::{ModelTracker, ModelTrackingConfig, TrackedFrame, TrackingReferenceKind};
 

@@ -140,17 +140,18 @@ impl KeyframeSet {
     /// pose: keyframe k at `keyframe_poses[k]`, a frame between at its odometry pose moved by
     /// its keyframe's correction `keyframe_poses[k] · odometry_k⁻¹`.
     ///
+    /// A frame between keyframes k and k + 1 is left out when their corrections differ by more
+    /// than `max_correction_change_m` or `max_correction_change_rad`: the odometry drifted or
+    /// failed within that stretch, so its poses there are not worth fusing.
+    ///
     /// # Errors
     /// [`MappingError::InvalidInput`] when `keyframe_poses` does not match the keyframes or a
     /// frame between names a keyframe that does not exist.
-    ///
-    /// A frame between keyframes k and k + 1 is left out when their corrections disagree by
-    /// more than `tolerance` (translation metres, rotation radians): the odometry drifted or
-    /// failed within that stretch, so its poses there are not worth fusing.
     pub fn fusion_order(
         &self,
         keyframe_poses: &[Isometry3<f64>],
-        tolerance: (f64, f64),
+        max_correction_change_m: f64,
+        max_correction_change_rad: f64,
     ) -> Result<Vec<(&RgbdFrame, Isometry3<f64>)>, MappingError> {
         if keyframe_poses.len() != self.frames.len()
             || self.world_from_camera_odometry.len() != self.frames.len()
@@ -172,8 +173,8 @@ impl KeyframeSet {
             order.push((frame, *pose));
             let consistent = corrections.get(k + 1).is_none_or(|next| {
                 let change = corrections[k].inverse() * next;
-                change.translation.vector.norm() <= tolerance.0
-                    && change.rotation.angle() <= tolerance.1
+                change.translation.vector.norm() <= max_correction_change_m
+                    && change.rotation.angle() <= max_correction_change_rad
             });
             while let Some(b) = between.next_if(|b| b.keyframe == k) {
                 if consistent {
@@ -232,22 +233,6 @@ pub struct RefinedMap {
     pub reintegrate_ms: f64,
     /// See `landmarks_ms`.
     pub mesh_ms: f64,
-}
-
-/// Fuses `frames` at `world_from_camera` into a fresh volume and meshes it.
-///
-/// # Errors
-/// [`MappingError::Tsdf`] for bad settings, frame sizes or poses.
-pub fn fuse_and_mesh(
-    camera: &PinholeCamera,
-    frames: &[RgbdFrame],
-    world_from_camera: &[Isometry3<f64>],
-    tsdf: &TsdfConfig,
-    meshing: &MeshingConfig,
-) -> Result<TriangleMesh, MappingError> {
-    let mut volume = TsdfVolume::new(tsdf.clone())?;
-    volume.reintegrate(frames, camera, world_from_camera)?;
-    Ok(extract_mesh(&volume, meshing))
 }
 
 /// Runs landmarks → bundle adjustment → re-integration → mesh on a target's keyframes.
@@ -360,23 +345,25 @@ pub fn refine_keyframes(
     }
     let ba_ms = started.elapsed().as_secs_f64() * 1e3;
 
-    let tolerance = (
-        config.between_max_correction_change_m,
-        config.between_max_correction_change_deg.to_radians(),
-    );
+    let order = |keyframe_poses| {
+        keyframes.fusion_order(
+            keyframe_poses,
+            config.between_max_correction_change_m,
+            config.between_max_correction_change_deg.to_radians(),
+        )
+    };
     let mesh_before = if config.mesh_before {
-        let order = keyframes.fusion_order(&keyframes.world_from_camera_odometry, tolerance)?;
-        let volume = fuse_in_order(camera, &order, &config.tsdf)?;
+        let volume = fuse_in_order(
+            camera,
+            &order(&keyframes.world_from_camera_odometry)?,
+            &config.tsdf,
+        )?;
         Some(extract_mesh(&volume, &config.meshing))
     } else {
         None
     };
     let started = Instant::now();
-    let volume = fuse_in_order(
-        camera,
-        &keyframes.fusion_order(&poses, tolerance)?,
-        &config.tsdf,
-    )?;
+    let volume = fuse_in_order(camera, &order(&poses)?, &config.tsdf)?;
     let reintegrate_ms = started.elapsed().as_secs_f64() * 1e3;
     let started = Instant::now();
     let mesh = extract_mesh(&volume, &config.meshing);
@@ -521,7 +508,7 @@ mod tests {
         };
         // The adjustment moves keyframe 0 by 2 cm and turns keyframe 1 by 0.01 rad.
         let refined = vec![at(0.02, 0.0), at(1.0, 0.31)];
-        let order = set.fusion_order(&refined, (1.0, 1.0)).unwrap();
+        let order = set.fusion_order(&refined, 1.0, 1.0).unwrap();
         let stamps: Vec<f64> = order.iter().map(|(f, _)| f.timestamp_s).collect();
         assert_eq!(stamps, vec![0.0, 0.5, 1.0, 1.5, 1.6]);
         assert_eq!(order[0].1, refined[0]);
@@ -538,11 +525,11 @@ mod tests {
 
         let mut bad = set.clone();
         bad.between_frames.push(between(2, 2.0, at(2.0, 0.0)));
-        assert!(bad.fusion_order(&refined, (1.0, 1.0)).is_err());
-        assert!(set.fusion_order(&refined[..1], (1.0, 1.0)).is_err());
+        assert!(bad.fusion_order(&refined, 1.0, 1.0).is_err());
+        assert!(set.fusion_order(&refined[..1], 1.0, 1.0).is_err());
         // The two corrections differ by 2 cm and 0.01 rad: with a tighter tolerance the frame
         // between them is left out; the frames after the last keyframe stay.
-        let strict = set.fusion_order(&refined, (0.005, 1.0)).unwrap();
+        let strict = set.fusion_order(&refined, 0.005, 1.0).unwrap();
         let stamps: Vec<f64> = strict.iter().map(|(f, _)| f.timestamp_s).collect();
         assert_eq!(stamps, vec![0.0, 1.0, 1.5, 1.6]);
     }
