@@ -1,4 +1,5 @@
-//! Benchmarks: min-snap solving (with time allocation and scaling) and simulated flight speed.
+//! Benchmarks: min-snap solving (with time allocation and scaling), simulated flight speed and
+//! clearance queries over a 200 m × 200 m, 0.5 m terrain grid.
 //!
 //! Run with `cargo bench -p scarp-planning --bench planning`. The flight benchmark also prints
 //! the real-time factor (simulated seconds per wall-clock second); the mission budget is ≥ 10×.
@@ -64,5 +65,37 @@ fn bench_flight(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, bench_min_snap, bench_flight);
+/// One clearance query per point of a 20 × 20 grid at `height_agl_m` over rolling terrain.
+fn bench_clearance(c: &mut Criterion) {
+    let terrain = Heightfield::from_fn(-100.0, -100.0, 0.5, 401, 401, |x, y| {
+        3.0 * (0.05 * x).sin() * (0.04 * y).cos() + 0.02 * x
+    })
+    .expect("terrain");
+    let env = Environment::new(Some(terrain.clone()), &[]).expect("env");
+    let mut group = c.benchmark_group("clearance");
+    for height_agl_m in [1.0, 10.0, 25.0] {
+        let points: Vec<Point3<f64>> = (0..400)
+            .map(|k| {
+                let (x, y) = (-90.0 + 9.0 * (k % 20) as f64, -90.0 + 9.0 * (k / 20) as f64);
+                Point3::new(
+                    x,
+                    y,
+                    terrain.height_at(x, y).expect("on grid") + height_agl_m,
+                )
+            })
+            .collect();
+        group.bench_function(format!("400_points_{height_agl_m:.0}m_agl"), |b| {
+            b.iter(|| {
+                points
+                    .iter()
+                    .filter_map(|p| env.clearance_at(black_box(p)))
+                    .map(|s| s.clearance_m)
+                    .sum::<f64>()
+            })
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench_min_snap, bench_flight, bench_clearance);
 criterion_main!(benches);

@@ -1,9 +1,10 @@
 //! Clearance of paths and trajectories from the terrain and the rocks.
 //!
-//! The terrain becomes a parry3d [`HeightField`] and mesh obstacles parry3d [`TriMesh`]es; this
-//! module is the only place that touches parry (f32, glam). Query points are moved into each
-//! shape's local frame in f64 first, so the f32 conversion loses nothing at ENU coordinates of
-//! a few kilometres.
+//! The terrain is measured by [`TerrainDistance`] (exact, f64), mesh obstacles by parry3d
+//! [`TriMesh`]es; this module is the only place that touches parry (f32, glam). Query points are
+//! moved into each mesh's local frame in f64 first, so the f32 conversion loses nothing at ENU
+//! coordinates of a few kilometres. parry's own heightfield query was not used: it tests every
+//! triangle within the query distance, thousands at search altitude.
 //!
 //! Clearance is the Euclidean distance from the vehicle's position to the nearest surface,
 //! negative when the position is under the terrain or inside an obstacle.
@@ -11,14 +12,14 @@
 use nalgebra::Point3;
 use parry3d::math::Vector as PVec;
 use parry3d::query::PointQuery;
-use parry3d::shape::{HeightField, TriMesh, TriMeshFlags};
-use parry3d::utils::Array2;
+use parry3d::shape::{TriMesh, TriMeshFlags};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{PlanError, check_point, check_positive};
 use crate::geometry::{Path, Waypoint};
 use crate::minsnap::{MinSnapConfig, StartState, Trajectory, plan_min_snap};
 use crate::terrain::{Heightfield, Obstacle};
+use crate::terrain_distance::TerrainDistance;
 
 /// Tunables of the clearance checks and repairs.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -180,66 +181,15 @@ impl ClearanceReport {
 }
 
 #[derive(Debug, Clone)]
-struct TerrainShape {
-    grid: Heightfield,
-    shape: HeightField,
-    center_x_m: f64,
-    center_y_m: f64,
-    /// Height subtracted before the f32 conversion, so that f32 keeps millimetres.
-    z_ref_m: f64,
-}
-
-impl TerrainShape {
-    fn new(grid: Heightfield) -> Result<Self, PlanError> {
-        grid.validate()?;
-        let (nx, ny) = (grid.nx, grid.ny);
-        let (lo, hi) = grid.height_range_m();
-        let z_ref_m = 0.5 * (lo + hi);
-        // parry: rows advance along local z, columns along local x, column-major storage.
-        // Local (x, y, z) = (world x − cx, world z − z_ref, world y − cy): an isometry of R³
-        // (a reflection), which preserves distances, all this module asks of it.
-        let mut data = vec![0.0f32; nx * ny];
-        for j in 0..ny {
-            for i in 0..nx {
-                data[j + i * ny] = (grid.node(i, j) - z_ref_m) as f32;
-            }
-        }
-        let sx = (nx - 1) as f64 * grid.spacing_m;
-        let sy = (ny - 1) as f64 * grid.spacing_m;
-        let shape = HeightField::new(
-            Array2::new(ny, nx, data),
-            PVec::new(sx as f32, 1.0, sy as f32),
-        );
-        Ok(Self {
-            center_x_m: grid.origin_x_m + 0.5 * sx,
-            center_y_m: grid.origin_y_m + 0.5 * sy,
-            shape,
-            grid,
-            z_ref_m,
-        })
-    }
-
-    fn clearance(&self, p: &Point3<f64>) -> f64 {
-        let local = PVec::new(
-            (p.x - self.center_x_m) as f32,
-            (p.z - self.z_ref_m) as f32,
-            (p.y - self.center_y_m) as f32,
-        );
-        let proj = self.shape.project_local_point(local, false);
-        let d = f64::from((proj.point - local).length());
-        match self.grid.height_at(p.x, p.y) {
-            Some(h) if p.z < h => -d,
-            _ => d,
-        }
-    }
-}
-
-#[derive(Debug, Clone)]
 enum ObstacleShape {
     Mesh {
         mesh: Box<TriMesh>,
         origin_m: Point3<f64>,
         oriented: bool,
+        /// The mesh's bounding box (world ENU, m): its distance bounds the clearance from
+        /// below, which lets far queries skip the triangle search.
+        lo_m: Point3<f64>,
+        hi_m: Point3<f64>,
     },
     Cylinder {
         cx: f64,
@@ -280,10 +230,22 @@ impl ObstacleShape {
                             false,
                         ),
                     };
+                let (lo_m, hi_m) = positions_m.iter().fold(
+                    (
+                        Point3::from([f64::INFINITY; 3]),
+                        Point3::from([f64::NEG_INFINITY; 3]),
+                    ),
+                    |(lo, hi), p| {
+                        let p = Point3::from(*p);
+                        (lo.inf(&p), hi.sup(&p))
+                    },
+                );
                 Ok(Self::Mesh {
                     mesh: Box::new(mesh),
                     origin_m: origin,
                     oriented,
+                    lo_m,
+                    hi_m,
                 })
             }
             Obstacle::Cylinder {
@@ -302,12 +264,25 @@ impl ObstacleShape {
         }
     }
 
+    /// A lower bound of [`Self::clearance`] at `p` that costs a few flops: the distance to the
+    /// mesh's bounding box (0 inside it), or the exact clearance of a cylinder.
+    fn clearance_lower_bound(&self, p: &Point3<f64>) -> f64 {
+        match self {
+            ObstacleShape::Mesh { lo_m, hi_m, .. } => {
+                let outside = (lo_m - p).sup(&(p - hi_m)).sup(&nalgebra::Vector3::zeros());
+                outside.norm()
+            }
+            ObstacleShape::Cylinder { .. } => self.clearance(p),
+        }
+    }
+
     fn clearance(&self, p: &Point3<f64>) -> f64 {
         match self {
             ObstacleShape::Mesh {
                 mesh,
                 origin_m,
                 oriented,
+                ..
             } => {
                 let d = p - origin_m;
                 let local = PVec::new(d.x as f32, d.y as f32, d.z as f32);
@@ -335,14 +310,16 @@ impl ObstacleShape {
 /// The world the vehicle must keep clear of: an optional terrain and a list of obstacles.
 #[derive(Debug, Clone)]
 pub struct Environment {
-    terrain: Option<TerrainShape>,
+    terrain: Option<TerrainDistance>,
     obstacles: Vec<ObstacleShape>,
 }
 
 impl Environment {
     /// Builds the environment. Fails if the terrain grid or an obstacle is malformed.
     pub fn new(terrain: Option<Heightfield>, obstacles: &[Obstacle]) -> Result<Self, PlanError> {
-        let terrain = terrain.map(TerrainShape::new).transpose()?;
+        let terrain = terrain
+            .map(|grid| grid.validate().map(|()| TerrainDistance::new(grid)))
+            .transpose()?;
         let obstacles = obstacles
             .iter()
             .enumerate()
@@ -361,14 +338,14 @@ impl Environment {
 
     /// The terrain grid, if any.
     pub fn terrain(&self) -> Option<&Heightfield> {
-        self.terrain.as_ref().map(|t| &t.grid)
+        self.terrain.as_ref().map(TerrainDistance::grid)
     }
 
     /// Terrain height under (x, y) (m), if the terrain covers that point.
     pub fn terrain_height_at(&self, x_m: f64, y_m: f64) -> Option<f64> {
         self.terrain
             .as_ref()
-            .and_then(|t| t.grid.height_at(x_m, y_m))
+            .and_then(|t| t.grid().height_at(x_m, y_m))
     }
 
     /// Fails with [`PlanError::TargetBelowTerrain`] if `p` lies more than `tolerance_m` below
@@ -394,20 +371,26 @@ impl Environment {
         if !p.iter().all(|v| v.is_finite()) {
             return None;
         }
-        let mut best: Option<ClearanceSample> = None;
-        let mut consider = |c: f64, source: ClearanceSource| {
+        let consider = |best: &mut Option<ClearanceSample>, c: f64, source: ClearanceSource| {
             if best.is_none_or(|b| c < b.clearance_m) {
-                best = Some(ClearanceSample {
+                *best = Some(ClearanceSample {
                     clearance_m: c,
                     source,
                 });
             }
         };
+        let mut best: Option<ClearanceSample> = None;
         if let Some(t) = &self.terrain {
-            consider(t.clearance(p), ClearanceSource::Terrain);
+            consider(&mut best, t.signed_distance_m(p), ClearanceSource::Terrain);
         }
         for (i, o) in self.obstacles.iter().enumerate() {
-            consider(o.clearance(p), ClearanceSource::Obstacle(i));
+            // A farther obstacle cannot win (ties keep the earlier source, as `consider` does);
+            // the bounding box's f64 distance is exact where the f32 projection rounds, so the
+            // margin keeps the skip from changing a result that rounding would have decided.
+            if best.is_some_and(|b| o.clearance_lower_bound(p) > b.clearance_m + 1e-3) {
+                continue;
+            }
+            consider(&mut best, o.clearance(p), ClearanceSource::Obstacle(i));
         }
         best
     }

@@ -64,6 +64,7 @@ pub mod minsnap;
 #[cfg(feature = "plot")]
 pub mod plot;
 pub mod terrain;
+pub mod terrain_distance;
 
 pub use error::PlanError;
 

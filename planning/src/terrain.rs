@@ -145,9 +145,10 @@ impl Heightfield {
         self.heights_m[j * self.nx + i]
     }
 
-    /// Bilinear terrain height at world (x, y) (metres), or `None` off the grid or for
-    /// non-finite input.
-    pub fn height_at(&self, x_m: f64, y_m: f64) -> Option<f64> {
+    /// The cell holding world (x, y) and the fractional position in it: `(i, j, fu, fv)` with
+    /// node (i, j) at its south-west corner and `fu`, `fv` in [0, 1]. `None` off the grid or
+    /// for non-finite input; the north and east edges belong to the last cell.
+    pub fn cell_at(&self, x_m: f64, y_m: f64) -> Option<(usize, usize, f64, f64)> {
         if !(x_m.is_finite() && y_m.is_finite() && self.contains(x_m, y_m)) {
             return None;
         }
@@ -156,8 +157,13 @@ impl Heightfield {
         // Both are ≥ 0 and ≤ n − 1 here, so the casts and the clamped indices are in range.
         let i = (u.floor() as usize).min(self.nx - 2);
         let j = (v.floor() as usize).min(self.ny - 2);
-        let fu = u - i as f64;
-        let fv = v - j as f64;
+        Some((i, j, u - i as f64, v - j as f64))
+    }
+
+    /// Bilinear terrain height at world (x, y) (metres), or `None` off the grid or for
+    /// non-finite input.
+    pub fn height_at(&self, x_m: f64, y_m: f64) -> Option<f64> {
+        let (i, j, fu, fv) = self.cell_at(x_m, y_m)?;
         let h00 = self.node(i, j);
         let h10 = self.node(i + 1, j);
         let h01 = self.node(i, j + 1);

@@ -51,6 +51,7 @@ fn load_config(path: Option<&PathBuf>) -> anyhow::Result<MissionConfig> {
 /// World, configuration, planning and writing errors. Ctrl-C is not an error: the run stops,
 /// writes its outputs with `interrupted: true` and returns.
 pub fn run(args: SimulateArgs) -> anyhow::Result<()> {
+    let started = std::time::Instant::now();
     let config = load_config(args.config.as_ref())?;
     let world = World::from_name_or_path(&args.world)
         .with_context(|| format!("loading world `{}`", args.world))?;
@@ -72,6 +73,7 @@ pub fn run(args: SimulateArgs) -> anyhow::Result<()> {
         seed: args.seed,
         out: args.out.clone(),
         stop: &stop,
+        started,
     })?;
     let bar = ProgressBar::new_spinner();
     if let Ok(style) = ProgressStyle::with_template("{spinner} {elapsed} {msg}") {

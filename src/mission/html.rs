@@ -331,10 +331,11 @@ cylinders black.</p><img src=\"map.png\" width=\"700\">\n",
     let s = &report.timings;
     let _ = write!(
         html,
-        "<h2>Wall time per stage (s)</h2><table><tr><th>flight</th><th>planning</th><th>render</th>\
+        "<h2>Wall time per stage (s)</h2><table><tr><th>setup</th><th>flight</th><th>planning</th><th>render</th>\
 <th>detect</th><th>track</th><th>localize</th><th>map</th><th>BA + mesh</th><th>fragility + export</th>\
-<th>evaluation</th></tr><tr><td>{:.1}</td><td>{:.1}</td><td>{:.1}</td><td>{:.1}</td><td>{:.1}</td>\
+<th>evaluation</th></tr><tr><td>{:.1}</td><td>{:.1}</td><td>{:.1}</td><td>{:.1}</td><td>{:.1}</td><td>{:.1}</td>\
 <td>{:.1}</td><td>{:.1}</td><td>{:.1}</td><td>{:.1}</td><td>{:.1}</td></tr></table>\n</body></html>\n",
+        s.setup_s,
         s.flight_s,
         s.planning_s,
         s.render_s,

@@ -83,6 +83,9 @@ pub struct TargetReport {
 /// Wall time spent in each stage, seconds.
 #[derive(Debug, Clone, Copy, Default, Serialize, Deserialize)]
 pub struct StageTimings {
+    /// Before the first frame: loading the world, writing its ground truth, building the
+    /// renderer and planning the search.
+    pub setup_s: f64,
     /// Flight dynamics and control.
     pub flight_s: f64,
     /// Path and trajectory planning.

@@ -83,6 +83,9 @@ pub struct MissionInputs<'a> {
     pub out: PathBuf,
     /// Set (by a Ctrl-C handler) to stop the run cleanly.
     pub stop: &'a AtomicBool,
+    /// When the command started: the reported wall time counts from here, so that loading
+    /// the world and planning the search count too (`timings.setup_s`).
+    pub started: Instant,
 }
 
 /// Progress of a running mission, for a progress bar.
@@ -249,8 +252,11 @@ impl<'a> Mission<'a> {
     /// # Errors
     /// Rendering, planning or writing errors; the outputs written so far stay consistent.
     pub fn run(mut self, progress: &mut dyn FnMut(&Progress)) -> anyhow::Result<MissionReport> {
-        let wall = Instant::now();
-        let mut timings = StageTimings::default();
+        let wall = self.inputs.started;
+        let mut timings = StageTimings {
+            setup_s: wall.elapsed().as_secs_f64(),
+            ..StageTimings::default()
+        };
         let end_reason = loop {
             if self.inputs.stop.load(Ordering::Relaxed) {
                 break "interrupted".to_string();
