@@ -847,7 +847,37 @@ const MAX_TRAJECTORY_S: f64 = 36_000.0;
 /// The first waypoint is the start position and yaw. Fails on bad input (fewer than 2
 /// waypoints, NaN, identical consecutive waypoints), a start faster than the limits, a failed
 /// solve, or if scaling cannot meet the limits.
+///
+/// A moving start can make the limits unreachable at any timing: stretching time does not
+/// scale the start's velocity, and it multiplies the velocity a fixed start acceleration
+/// builds up. Then the start's acceleration and yaw rate are dropped, and failing that its
+/// velocity too; the reference steps there (by at most the start state, which the controller
+/// absorbs), and the trajectory meets the limits.
 pub fn plan_min_snap(
+    path: &Path,
+    start: &StartState,
+    cfg: &MinSnapConfig,
+) -> Result<Trajectory, PlanError> {
+    let exact = plan_min_snap_from(path, start, cfg);
+    let rest = StartState::default();
+    let timing_failed = matches!(
+        exact,
+        Err(PlanError::Solver { .. } | PlanError::LimitsNotMet { .. })
+    );
+    if !timing_failed || *start == rest {
+        return exact;
+    }
+    let velocity_only = StartState {
+        velocity_mps: start.velocity_mps,
+        ..rest
+    };
+    plan_min_snap_from(path, &velocity_only, cfg)
+        .or_else(|_| plan_min_snap_from(path, &rest, cfg))
+        .or(exact)
+}
+
+/// [`plan_min_snap`] with `start` held exactly.
+fn plan_min_snap_from(
     path: &Path,
     start: &StartState,
     cfg: &MinSnapConfig,
@@ -872,11 +902,23 @@ pub fn plan_min_snap(
     let v_lim = (cfg.limit_margin * cfg.max_speed_mps).max(v0);
     let a_lim = (cfg.limit_margin * cfg.max_accel_mps2).max(start.acceleration_mps2.norm());
     let w_lim = (cfg.limit_margin * cfg.max_yaw_rate_radps).max(start.yaw_rate_radps.abs());
+    // The hard limits, which the margin above aims under.
+    let v_max = cfg.max_speed_mps.max(v0);
+    let a_max = cfg.max_accel_mps2.max(start.acceleration_mps2.norm());
+    let w_max = cfg.max_yaw_rate_radps.max(start.yaw_rate_radps.abs());
     let mut best_feasible: Option<Trajectory> = None;
+    // The trajectory with the lowest peaks relative to the hard limits, and that ratio.
+    let mut least_over: Option<(f64, Trajectory)> = None;
     let mut last_peaks = TrajectoryPeaks::default();
     for _ in 0..cfg.max_scaling_iterations.max(1) {
         let total_s: f64 = durations.iter().sum();
         if !(total_s.is_finite() && total_s <= MAX_TRAJECTORY_S) {
+            if least_over
+                .as_ref()
+                .is_some_and(|(over_hard, _)| *over_hard <= 1.0)
+            {
+                break;
+            }
             return Err(PlanError::Solver {
                 reason: format!(
                     "time scaling stretched the trajectory to {total_s:.3e} s (more than {MAX_TRAJECTORY_S} s): the waypoints cannot be flown within the limits"
@@ -899,6 +941,17 @@ pub fn plan_min_snap(
             if done {
                 break;
             }
+        } else {
+            // A start speed (or acceleration) near the limit is not scaled away, and the
+            // trajectory leaving it overshoots it by a fixed factor: stretching may never get
+            // under the margin. Then the trajectory with the lowest peaks is the answer, if
+            // they are within the hard limits.
+            let over_hard = (p.speed_mps / v_max)
+                .max((p.accel_mps2 / a_max).sqrt())
+                .max(p.yaw_rate_radps / w_max);
+            if least_over.as_ref().is_none_or(|(r, _)| over_hard < *r) {
+                least_over = Some((over_hard, traj));
+            }
         }
         // Over the limit: stretch a little more than needed, so the loop terminates even when
         // the start state makes the scaling inexact.
@@ -912,6 +965,11 @@ pub fn plan_min_snap(
         }
     }
     best_feasible
+        .or_else(|| {
+            least_over
+                .filter(|(over_hard, _)| *over_hard <= 1.0)
+                .map(|(_, t)| t)
+        })
         .map(|mut t| {
             t.waypoint_knots = waypoint_knots;
             t
