@@ -114,6 +114,7 @@ impl MissionConfig {
             ("collision_radius_m", self.collision_radius_m),
             ("duplicate_radius_m", self.duplicate_radius_m),
             ("cylinder.min_radius_m", self.cylinder.min_radius_m),
+            ("cylinder.max_recenter_m", self.cylinder.max_recenter_m),
             ("mapping.voxel_size_m", self.mapping.voxel_size_m),
             ("mapping.max_depth_m", self.mapping.max_depth_m),
         ];
@@ -177,6 +178,10 @@ pub struct CylinderEstimateConfig {
     /// The bottom sits this far below the terrain under C_e, metres (the pedestal's foot).
     /// Default 0.2.
     pub bottom_below_terrain_m: f64,
+    /// A move of the cylinder onto the first mapped frame's box
+    /// (`mapping.recenter_on_first_frame`) larger than this (horizontal, metres) is not
+    /// trusted: the cylinder stays where the localization put it. Default 3.
+    pub max_recenter_m: f64,
 }
 
 impl Default for CylinderEstimateConfig {
@@ -187,6 +192,7 @@ impl Default for CylinderEstimateConfig {
             max_radius_m: 2.5,
             top_over_center_radii: 1.2,
             bottom_below_terrain_m: 0.2,
+            max_recenter_m: 3.0,
         }
     }
 }
@@ -200,11 +206,19 @@ pub struct MappingConfig {
     /// Depth beyond this is not fused, metres. Default 5.
     pub max_depth_m: f64,
     /// The region of interest is the target's cylinder grown by this, metres. Default 1.0:
-    /// the localization error (up to about 1 m) must not cut the rock off.
+    /// the cylinder's error in the map frame (its box in the first mapped frame with
+    /// `recenter_on_first_frame`, else the localization error plus the GPS walk since) must
+    /// not cut the rock off.
     pub roi_margin_m: f64,
     /// ... and by this up and down, metres. Default 2.0: the map is anchored at the GPS
     /// estimate of its first frame, whose vertical error can exceed a metre.
     pub roi_vertical_margin_m: f64,
+    /// Just before the first frame is mapped, move the cylinder (and its region of interest)
+    /// to where the detector sees the target in that frame, within `cylinder.max_recenter_m`.
+    /// Default true: the GPS walk over the transit from the localization circle to the rings
+    /// offsets the rock in its map frame by 0.5–1.4 m, which cut one side off a rock of the
+    /// default world.
+    pub recenter_on_first_frame: bool,
     /// Drop mesh components smaller than this many triangles. Default 500.
     pub min_component_triangles: usize,
     /// Landmarks, bundle adjustment, re-integration and meshing of the keyframes (its TSDF
@@ -235,6 +249,7 @@ impl Default for MappingConfig {
             max_depth_m: 5.0,
             roi_margin_m: 1.0,
             roi_vertical_margin_m: 2.0,
+            recenter_on_first_frame: true,
             min_component_triangles: 500,
             refine: scarp_slam::mapping::RefineConfig::default(),
             odometry: scarp_slam::odometry::OdometryConfig::default(),

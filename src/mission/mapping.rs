@@ -162,6 +162,43 @@ impl MappingSession {
         self.target_id
     }
 
+    /// The cylinder the map covers (map frame, which is the state estimate's frame at the
+    /// first mapped frame).
+    pub fn cylinder(&self) -> &VerticalCylinder {
+        &self.cylinder
+    }
+
+    /// Whether no frame has been mapped yet: the map frame is not anchored, and the cylinder
+    /// can still move ([`Self::recenter`]).
+    pub fn is_empty(&self) -> bool {
+        self.frames_mapped == 0
+    }
+
+    /// Whether a frame seen from `world_from_camera` would be mapped.
+    pub fn would_map(&self, world_from_camera: &Isometry3<f64>) -> bool {
+        let max_depth = f64::from(self.tracker.volume().config().max_depth_m);
+        sees_cylinder(&self.camera, world_from_camera, &self.cylinder, max_depth)
+    }
+
+    /// Moves the cylinder (its region of interest and coverage) before the first frame is
+    /// mapped.
+    ///
+    /// # Errors
+    /// A map that already holds frames (its frame is anchored), or invalid settings.
+    pub fn recenter(
+        &mut self,
+        cylinder: &VerticalCylinder,
+        config: &MissionConfig,
+    ) -> anyhow::Result<()> {
+        anyhow::ensure!(
+            self.is_empty(),
+            "target {}: the map already holds frames; its cylinder cannot move",
+            self.target_id
+        );
+        *self = Self::new(self.target_id, cylinder, &self.camera, config)?;
+        Ok(())
+    }
+
     /// How far the odometry's position of the last mapped frame is from the truth (metres,
     /// world ENU): the navigation error of a vehicle flying on the map's odometry. `None`
     /// before the first frame and after an odometry failure (then the state estimate is all
@@ -186,13 +223,7 @@ impl MappingSession {
         world_from_camera_estimate: &Isometry3<f64>,
         world_from_camera_truth: &Isometry3<f64>,
     ) -> anyhow::Result<()> {
-        let max_depth = f64::from(self.tracker.volume().config().max_depth_m);
-        if !sees_cylinder(
-            &self.camera,
-            world_from_camera_estimate,
-            &self.cylinder,
-            max_depth,
-        ) {
+        if !self.would_map(world_from_camera_estimate) {
             return Ok(());
         }
         frame.instance_mask = None;
@@ -524,5 +555,33 @@ fn score_against_ground_truth(
         && let Some([_, at_2cm]) = score_mesh(world, rock, truth, odometry_poses, before, camera)
     {
         report.fscore_2cm_before_ba = Some(at_2cm.fscore);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_empty_map_moves_its_region_and_a_started_one_refuses() {
+        let config = MissionConfig::default();
+        let camera = PinholeCamera::from_hfov(64, 48, 80.0).unwrap();
+        let cylinder = VerticalCylinder::new(0.0, 0.0, 1.0, 0.0, 2.0).unwrap();
+        let mut session = MappingSession::new(7, &cylinder, &camera, &config).unwrap();
+        let moved = VerticalCylinder::new(0.5, -0.3, 1.0, 0.0, 2.0).unwrap();
+        session.recenter(&moved, &config).unwrap();
+        assert_eq!(session.cylinder(), &moved);
+        assert_eq!(session.target_id(), 7);
+        let m = &config.mapping;
+        assert_eq!(
+            session.tracker.volume().config().roi,
+            Some(roi_of(&moved, m.roi_margin_m, m.roi_vertical_margin_m))
+        );
+        // Once a frame is mapped the map frame is anchored around the cylinder.
+        session.frames_mapped = 1;
+        assert!(!session.is_empty());
+        let err = session.recenter(&cylinder, &config).unwrap_err();
+        assert!(err.to_string().contains("already holds frames"), "{err}");
+        assert_eq!(session.cylinder(), &moved);
     }
 }

@@ -8,7 +8,7 @@
 
 use std::time::Instant;
 
-use nalgebra::{Isometry3, Point3};
+use nalgebra::{Isometry3, Point2, Point3};
 use rand::SeedableRng;
 use rand::rngs::Xoshiro256PlusPlus;
 use scarp_datasets::noise::derive_seed;
@@ -73,6 +73,51 @@ pub fn median_depth_in_box(
     }
     samples.sort_by(f64::total_cmp);
     Some(samples[samples.len() / 2])
+}
+
+/// A target's box in one frame, with the estimated pose it was seen from.
+#[derive(Debug, Clone, Copy)]
+pub struct Sighting {
+    /// The frame's estimated `world_from_camera` (world ENU metres).
+    pub world_from_camera: Isometry3<f64>,
+    /// The box that matched the target.
+    pub bbox: BoundingBox,
+    /// Median measured depth over the box's central half, metres.
+    pub depth_m: f64,
+}
+
+/// The target's centre seen from `sightings`, in the frame of their estimated poses: each box centre's ray is followed to its median depth (a point on the rock's near
+/// surface) and then `radius_m` further along the ray, which is exact for a sphere of that
+/// radius; the result is the component-wise median over the sightings. `None` without
+/// sightings.
+///
+/// Why: the point set's centre carries the GPS error of the localization, while the map is
+/// anchored at the estimate of its first frame, seconds later. With the GPS walk (τ = 30 s)
+/// the two differ by up to a metre or more, enough to push the rock out of its region of
+/// interest; a box in the first mapped frame sees it in the frame the map will use.
+pub fn center_from_sightings(
+    camera: &PinholeCamera,
+    sightings: &[Sighting],
+    radius_m: f64,
+) -> Option<Point3<f64>> {
+    if sightings.is_empty() {
+        return None;
+    }
+    let centers: Vec<Point3<f64>> = sightings
+        .iter()
+        .map(|s| {
+            let (u, v) = s.bbox.center();
+            let on_surface = camera.unproject(&Point2::new(u, v), s.depth_m);
+            let along_ray = on_surface.coords.normalize() * radius_m;
+            s.world_from_camera * (on_surface + along_ray)
+        })
+        .collect();
+    let median = |axis: usize| {
+        let mut v: Vec<f64> = centers.iter().map(|c| c[axis]).collect();
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    Some(Point3::new(median(0), median(1), median(2)))
 }
 
 /// Wall time of each perception stage for one frame, seconds.
@@ -194,12 +239,106 @@ impl Perception {
     pub fn target_state(&self, id: u32) -> Option<TargetState> {
         self.catalog.target(id).map(Self::state_of)
     }
+
+    /// Runs the detector alone on `frame` (no tracking, no depth filter) and returns the
+    /// detection whose box centre lies nearest to where `expected` (world ENU, in the frame of
+    /// `world_from_camera`) projects, within `gate_px`, as a sighting; `None` when the point is
+    /// behind the camera, nothing is near it, or its box has no depth.
+    ///
+    /// # Errors
+    /// A frame without an instance mask.
+    pub fn sight_near(
+        &mut self,
+        frame: &RgbdFrame,
+        camera: &PinholeCamera,
+        world_from_camera: &Isometry3<f64>,
+        expected: &Point3<f64>,
+        gate_px: f64,
+    ) -> anyhow::Result<Option<Sighting>> {
+        let in_camera = world_from_camera.inverse() * expected;
+        if in_camera.z <= 0.0 {
+            return Ok(None);
+        }
+        let Some(pixel) = camera.project(&in_camera) else {
+            return Ok(None);
+        };
+        let detections = self.detector.detect(frame)?;
+        let distance_px = |b: &BoundingBox| {
+            let (u, v) = b.center();
+            (u - pixel.x).hypot(v - pixel.y)
+        };
+        let nearest = detections
+            .iter()
+            .map(|d| d.bbox)
+            .filter(|b| distance_px(b) <= gate_px)
+            .min_by(|a, b| distance_px(a).total_cmp(&distance_px(b)));
+        Ok(nearest.and_then(|bbox| {
+            median_depth_in_box(&frame.depth_m, &bbox).map(|depth_m| Sighting {
+                world_from_camera: *world_from_camera,
+                bbox,
+                depth_m,
+            })
+        }))
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use nalgebra::{Translation3, UnitQuaternion, Vector3};
     use scarp_slam::image::DepthImage;
+
+    /// A camera at `eye` looking at `target` (z forward, y down in the image).
+    fn looking_at(eye: Point3<f64>, target: Point3<f64>) -> Isometry3<f64> {
+        let z = (target - eye).normalize();
+        let x = z.cross(&Vector3::z()).normalize();
+        let y = z.cross(&x);
+        let rotation = nalgebra::Rotation3::from_basis_unchecked(&[x, y, z]);
+        Isometry3::from_parts(
+            Translation3::from(eye.coords),
+            UnitQuaternion::from_rotation_matrix(&rotation),
+        )
+    }
+
+    #[test]
+    fn sightings_of_a_sphere_find_its_centre() {
+        let camera = PinholeCamera::from_hfov(640, 480, 80.0).unwrap();
+        let (center, radius) = (Point3::new(3.0, -2.0, 1.0), 0.7);
+        // A stale sighting far off, then eight from around a circle, 55° down.
+        let stale = Sighting {
+            world_from_camera: looking_at(Point3::new(40.0, 0.0, 9.0), center),
+            bbox: BoundingBox::new(10.0, 10.0, 30.0, 30.0).unwrap(),
+            depth_m: 5.0,
+        };
+        let mut sightings = vec![stale];
+        for k in 0..8 {
+            let a = f64::from(k) * 0.2;
+            let eye =
+                center + Vector3::new(8.0 * a.cos(), 8.0 * a.sin(), 8.0 * 55f64.to_radians().tan());
+            let pose = looking_at(eye, center);
+            let in_camera = pose.inverse() * center;
+            let pixel = camera.project(&in_camera).unwrap();
+            let distance = in_camera.coords.norm();
+            sightings.push(Sighting {
+                world_from_camera: pose,
+                bbox: BoundingBox::new(
+                    pixel.x - 20.0,
+                    pixel.y - 15.0,
+                    pixel.x + 20.0,
+                    pixel.y + 15.0,
+                )
+                .unwrap(),
+                // The z-depth of the sphere's near point on the central ray.
+                depth_m: in_camera.z * (distance - radius) / distance,
+            });
+        }
+        let found = center_from_sightings(&camera, &sightings[1..], radius).unwrap();
+        assert!((found - center).norm() < 1e-9, "{found:?}");
+        // The median shrugs off the stale sighting.
+        let with_stale = center_from_sightings(&camera, &sightings, radius).unwrap();
+        assert!((with_stale - center).norm() < 1e-9, "{with_stale:?}");
+        assert!(center_from_sightings(&camera, &[], radius).is_none());
+    }
 
     #[test]
     fn median_depth_reads_the_box_centre() {

@@ -19,7 +19,10 @@ pub struct TargetReport {
     pub status: String,
     /// Localized centre C_e, world ENU metres.
     pub center: [f64; 3],
-    /// The bounding cylinder flown around it: radius, bottom and top z, metres.
+    /// Axis of the bounding cylinder flown around it (x, y), world ENU metres: C_e, or where
+    /// the latest boxes saw the target (`cylinder.recenter_sightings`).
+    pub cylinder_center_xy: [f64; 2],
+    /// The bounding cylinder's radius, metres.
     pub cylinder_radius_m: f64,
     /// Bottom of the cylinder (world z, m).
     pub cylinder_z_bottom_m: f64,

@@ -25,8 +25,12 @@ use super::mapping::{MappingSession, finish_target};
 use super::mode::{FlightLogEntry, Mode};
 use super::motion::MotionSystem;
 use super::mount::CameraMount;
-use super::perception::Perception;
+use super::perception::{Perception, center_from_sightings};
 use super::report::{MissionReport, ModeChange, StageTimings};
+
+/// Frames tried (at the map camera rate: 1 s) to see the target before its map starts anyway
+/// (`Mission::recenter_map_on_first_frame`).
+const RECENTER_ATTEMPTS: usize = 20;
 
 /// Where the lawn-mower was left, to resume it.
 #[derive(Debug, Clone)]
@@ -125,6 +129,8 @@ pub struct Mission<'a> {
     /// The last FineLocalize depth image and its estimated pose: where the ground under a
     /// target is, in the frame the vehicle flies in.
     last_depth: Option<(scarp_slam::image::DepthImage, Isometry3<f64>)>,
+    /// Frames tried so far to see the target being mapped before its first mapped frame.
+    recenter_attempts: usize,
 }
 
 impl<'a> Mission<'a> {
@@ -201,6 +207,7 @@ impl<'a> Mission<'a> {
             frame_index: 0,
             min_clearance_m: None,
             last_depth: None,
+            recenter_attempts: 0,
             inputs,
         })
     }
@@ -369,10 +376,14 @@ impl<'a> Mission<'a> {
             }
             Mode::Map(id) => {
                 self.report.frames_map += 1;
+                let map_this_frame =
+                    self.recenter_map_on_first_frame(id, &frame, &estimate, timings)?;
                 let clock = Instant::now();
                 let complete = match self.mapping.as_mut() {
                     Some(session) => {
-                        session.process(frame, &estimate, &truth)?;
+                        if map_this_frame {
+                            session.process(frame, &estimate, &truth)?;
+                        }
                         session.coverage().is_complete()
                     }
                     None => true,
@@ -609,6 +620,102 @@ impl<'a> Mission<'a> {
         )?)
     }
 
+    /// Just before the first frame is mapped (which anchors the map frame at this frame's
+    /// state estimate), moves the cylinder to where the detector sees the target in this very
+    /// frame. The cylinder came from the localization, seconds earlier: the GPS walk since
+    /// then (τ = 30 s, 0.5–1.4 m over the transit to the rings in the default world) would
+    /// otherwise offset the rock in its region of interest and cut it.
+    ///
+    /// Returns whether to map this frame: a frame whose box is missed or clipped by the image
+    /// border is skipped (the map stays unanchored) for up to [`RECENTER_ATTEMPTS`] frames;
+    /// then the map starts where the localization put the cylinder.
+    fn recenter_map_on_first_frame(
+        &mut self,
+        id: u32,
+        frame: &RgbdFrame,
+        estimate: &Isometry3<f64>,
+        timings: &mut StageTimings,
+    ) -> anyhow::Result<bool> {
+        let Some(session) = self.mapping.as_ref() else {
+            return Ok(true);
+        };
+        let config = &self.inputs.config;
+        if !config.mapping.recenter_on_first_frame
+            || !session.is_empty()
+            || !session.would_map(estimate)
+            || self.recenter_attempts >= RECENTER_ATTEMPTS
+        {
+            return Ok(true);
+        }
+        self.recenter_attempts += 1;
+        let old = *session.cylinder();
+        let mid = old.axis_point(0.5 * (old.z_bottom_m + old.z_top_m));
+        // A box centre further than a quarter of the image from the expected centre is
+        // another object.
+        let gate_px = 0.25 * f64::from(self.camera.width);
+        let sighting = self
+            .perception
+            .sight_near(frame, &self.camera, estimate, &mid, gate_px)?
+            .filter(|s| {
+                s.bbox
+                    .is_inside_image(self.camera.width, self.camera.height, 2.0)
+            });
+        let seen = sighting
+            .and_then(|s| center_from_sightings(&self.camera, &[s], old.radius_m))
+            .map(|c| (c, (c.x - old.center_x_m).hypot(c.y - old.center_y_m)))
+            .filter(|&(_, moved_m)| moved_m <= config.cylinder.max_recenter_m);
+        let Some((seen, moved_m)) = seen else {
+            return Ok(self.recenter_attempts >= RECENTER_ATTEMPTS);
+        };
+        let cylinder =
+            VerticalCylinder::new(seen.x, seen.y, old.radius_m, old.z_bottom_m, old.z_top_m)?;
+        tracing::info!(
+            "target {id}: map cylinder moved {moved_m:.2} m to where the first mapped frame sees it"
+        );
+        if let Some(session) = self.mapping.as_mut() {
+            session.recenter(&cylinder, &self.inputs.config)?;
+        }
+        // The rings follow the cylinder, or the coverage it measures is flown off-centre.
+        let clock = Instant::now();
+        match self.fly_rings_around(&cylinder) {
+            Ok(rings) => {
+                if let Some(m) = self.targets.get_mut(&id) {
+                    m.report.base_ring_flown = rings.flies_base_ring();
+                    m.report.ring_repairs.clone_from(&rings.repairs);
+                }
+                self.ring_plan = Some(rings);
+            }
+            Err(e) => tracing::warn!(
+                "target {id}: the rings around the moved cylinder could not be planned ({e:#}); \
+                 flying the first ones"
+            ),
+        }
+        timings.planning_s += clock.elapsed().as_secs_f64();
+        if let Some(m) = self.targets.get_mut(&id) {
+            m.report.cylinder_center_xy = [cylinder.center_x_m, cylinder.center_y_m];
+            m.cylinder = Some(cylinder);
+        }
+        // Moved, the cylinder may fall out of this frame's view: try again on the next one.
+        Ok(self.mapping.as_ref().is_some_and(|s| s.would_map(estimate)))
+    }
+
+    /// Plans the mapping rings around `cylinder` from where the vehicle is and starts flying
+    /// them; on an error the current trajectory is kept.
+    fn fly_rings_around(&mut self, cylinder: &VerticalCylinder) -> anyhow::Result<RingPlan> {
+        let config = &self.inputs.config;
+        let rings = plan_mapping_rings_clear(
+            cylinder,
+            &self.motion.current_waypoint(),
+            &config.planning.camera,
+            &config.planning.mapping,
+            &self.env,
+            &config.planning.clearance,
+        )?;
+        self.motion
+            .follow(&rings.path.waypoints[1..], &self.env, &config.planning)?;
+        Ok(rings)
+    }
+
     fn start_mapping(&mut self, id: u32, timings: &mut StageTimings) -> anyhow::Result<()> {
         let Some(state) = self.perception.target_state(id) else {
             return self.resume_search(timings);
@@ -618,25 +725,12 @@ impl<'a> Mission<'a> {
         }
         let clock = Instant::now();
         let cylinder = self.target_cylinder(&state.points, &state.center)?;
-        let config = &self.inputs.config;
-        let rings = plan_mapping_rings_clear(
-            &cylinder,
-            &self.motion.current_waypoint(),
-            &config.planning.camera,
-            &config.planning.mapping,
-            &self.env,
-            &config.planning.clearance,
-        );
-        let result = rings.map_err(anyhow::Error::from).and_then(|rings| {
-            self.motion
-                .follow(&rings.path.waypoints[1..], &self.env, &config.planning)
-                .map_err(anyhow::Error::from)?;
-            Ok(rings)
-        });
+        let result = self.fly_rings_around(&cylinder);
         timings.planning_s += clock.elapsed().as_secs_f64();
         if let Some(m) = self.targets.get_mut(&id) {
             m.report.localization_converged = state.converged;
             m.report.center = state.center.coords.into();
+            m.report.cylinder_center_xy = [cylinder.center_x_m, cylinder.center_y_m];
             m.report.cylinder_radius_m = cylinder.radius_m;
             m.report.cylinder_z_bottom_m = cylinder.z_bottom_m;
             m.report.cylinder_z_top_m = cylinder.z_top_m;
@@ -649,6 +743,7 @@ impl<'a> Mission<'a> {
                     m.report.ring_repairs.clone_from(&rings.repairs);
                 }
                 self.ring_plan = Some(rings);
+                self.recenter_attempts = 0;
                 self.mapping = Some(MappingSession::new(
                     id,
                     &cylinder,
