@@ -75,49 +75,86 @@ pub fn median_depth_in_box(
     Some(samples[samples.len() / 2])
 }
 
-/// A target's box in one frame, with the estimated pose it was seen from.
-#[derive(Debug, Clone, Copy)]
-pub struct Sighting {
-    /// The frame's estimated `world_from_camera` (world ENU metres).
-    pub world_from_camera: Isometry3<f64>,
-    /// The box that matched the target.
-    pub bbox: BoundingBox,
-    /// Median measured depth over the box's central half, metres.
-    pub depth_m: f64,
+/// Height above the lowest points in a box (the ground at the rock's foot) from which depth
+/// points count as the target, metres.
+const ABOVE_GROUND_M: f64 = 0.25;
+
+/// Fewest target points [`center_in_box`] accepts.
+const MIN_TARGET_POINTS: usize = 30;
+
+/// The `q`-quantile of `values` (sorted in place); `values` must not be empty.
+fn quantile(values: &mut [f64], q: f64) -> f64 {
+    values.sort_by(f64::total_cmp);
+    values[((values.len() - 1) as f64 * q).round() as usize]
 }
 
-/// The target's centre seen from `sightings`, in the frame of their estimated poses: each box centre's ray is followed to its median depth (a point on the rock's near
-/// surface) and then `radius_m` further along the ray, which is exact for a sphere of that
-/// radius; the result is the component-wise median over the sightings. `None` without
-/// sightings.
+/// The centre of the object in `bbox`, from the depth points inside the box, in the frame of
+/// `world_from_camera` (world ENU metres). Points more than 0.25 m above the box's lowest
+/// points (the ground at its foot) are the object. Across the horizontal viewing direction its
+/// centre is the middle of their extent (1st to 99th percentile, against depth noise); along
+/// it, the nearest of them plus half that extent (a round cross-section). `None` with fewer
+/// than 30 such points.
 ///
 /// Why: the point set's centre carries the GPS error of the localization, while the map is
 /// anchored at the estimate of its first frame, seconds later. With the GPS walk (τ = 30 s)
 /// the two differ by up to a metre or more, enough to push the rock out of its region of
-/// interest; a box in the first mapped frame sees it in the frame the map will use.
-pub fn center_from_sightings(
+/// interest; a box in the first mapped frame sees it in the frame the map will use. Its
+/// silhouette's extent does not depend on how steeply the camera looks down at it.
+pub fn center_in_box(
     camera: &PinholeCamera,
-    sightings: &[Sighting],
-    radius_m: f64,
+    depth_m: &scarp_slam::image::DepthImage,
+    world_from_camera: &Isometry3<f64>,
+    bbox: &BoundingBox,
 ) -> Option<Point3<f64>> {
-    if sightings.is_empty() {
+    let clamp = |v: f64, n: u32| v.round().clamp(0.0, f64::from(n) - 1.0) as u32;
+    let (u0, u1) = (
+        clamp(bbox.x_min, depth_m.width()),
+        clamp(bbox.x_max, depth_m.width()),
+    );
+    let (v0, v1) = (
+        clamp(bbox.y_min, depth_m.height()),
+        clamp(bbox.y_max, depth_m.height()),
+    );
+    let mut points = Vec::new();
+    for v in v0..=v1 {
+        for u in u0..=u1 {
+            if let Some(&d) = depth_m.get(u, v)
+                && d > 0.0
+            {
+                let p = camera.unproject(&Point2::new(f64::from(u), f64::from(v)), f64::from(d));
+                points.push(world_from_camera * p);
+            }
+        }
+    }
+    if points.len() < MIN_TARGET_POINTS {
         return None;
     }
-    let centers: Vec<Point3<f64>> = sightings
-        .iter()
-        .map(|s| {
-            let (u, v) = s.bbox.center();
-            let on_surface = camera.unproject(&Point2::new(u, v), s.depth_m);
-            let along_ray = on_surface.coords.normalize() * radius_m;
-            s.world_from_camera * (on_surface + along_ray)
-        })
+    let ground_z = quantile(&mut points.iter().map(|p| p.z).collect::<Vec<_>>(), 0.05);
+    let target: Vec<Point3<f64>> = points
+        .into_iter()
+        .filter(|p| p.z > ground_z + ABOVE_GROUND_M)
         .collect();
-    let median = |axis: usize| {
-        let mut v: Vec<f64> = centers.iter().map(|c| c[axis]).collect();
-        v.sort_by(f64::total_cmp);
-        v[v.len() / 2]
+    if target.len() < MIN_TARGET_POINTS {
+        return None;
+    }
+    let eye = world_from_camera.translation.vector;
+    let median_of = |f: &dyn Fn(&Point3<f64>) -> f64| {
+        quantile(&mut target.iter().map(f).collect::<Vec<_>>(), 0.5)
     };
-    Some(Point3::new(median(0), median(1), median(2)))
+    let toward = nalgebra::Vector2::new(median_of(&|p| p.x) - eye.x, median_of(&|p| p.y) - eye.y);
+    if toward.norm() < 1e-6 {
+        return None;
+    }
+    let forward = toward.normalize();
+    let across = nalgebra::Vector2::new(-forward.y, forward.x);
+    let along_of = |p: &Point3<f64>| forward.dot(&(p.xy().coords - eye.xy()));
+    let across_of = |p: &Point3<f64>| across.dot(&(p.xy().coords - eye.xy()));
+    let mut across_m: Vec<f64> = target.iter().map(across_of).collect();
+    let (left, right) = (quantile(&mut across_m, 0.01), quantile(&mut across_m, 0.99));
+    let nearest = quantile(&mut target.iter().map(along_of).collect::<Vec<_>>(), 0.01);
+    let half_width = 0.5 * (right - left);
+    let center_xy = eye.xy() + forward * (nearest + half_width) + across * (0.5 * (left + right));
+    Some(Point3::new(center_xy.x, center_xy.y, median_of(&|p| p.z)))
 }
 
 /// Wall time of each perception stage for one frame, seconds.
@@ -240,21 +277,21 @@ impl Perception {
         self.catalog.target(id).map(Self::state_of)
     }
 
-    /// Runs the detector alone on `frame` (no tracking, no depth filter) and returns the
-    /// detection whose box centre lies nearest to where `expected` (world ENU, in the frame of
-    /// `world_from_camera`) projects, within `gate_px`, as a sighting; `None` when the point is
-    /// behind the camera, nothing is near it, or its box has no depth.
+    /// Runs the detector alone on `frame` (no tracking, no depth filter) and returns the box
+    /// whose centre lies nearest to where `expected` (world ENU, in the frame of
+    /// `world_from_camera`) projects, within `gate_px`; `None` when the point is behind the
+    /// camera or nothing is near it.
     ///
     /// # Errors
     /// A frame without an instance mask.
-    pub fn sight_near(
+    pub fn detect_near(
         &mut self,
         frame: &RgbdFrame,
         camera: &PinholeCamera,
         world_from_camera: &Isometry3<f64>,
         expected: &Point3<f64>,
         gate_px: f64,
-    ) -> anyhow::Result<Option<Sighting>> {
+    ) -> anyhow::Result<Option<BoundingBox>> {
         let in_camera = world_from_camera.inverse() * expected;
         if in_camera.z <= 0.0 {
             return Ok(None);
@@ -267,25 +304,18 @@ impl Perception {
             let (u, v) = b.center();
             (u - pixel.x).hypot(v - pixel.y)
         };
-        let nearest = detections
+        Ok(detections
             .iter()
             .map(|d| d.bbox)
             .filter(|b| distance_px(b) <= gate_px)
-            .min_by(|a, b| distance_px(a).total_cmp(&distance_px(b)));
-        Ok(nearest.and_then(|bbox| {
-            median_depth_in_box(&frame.depth_m, &bbox).map(|depth_m| Sighting {
-                world_from_camera: *world_from_camera,
-                bbox,
-                depth_m,
-            })
-        }))
+            .min_by(|a, b| distance_px(a).total_cmp(&distance_px(b))))
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use nalgebra::{Translation3, UnitQuaternion, Vector3};
+    use nalgebra::{Point2, Translation3, UnitQuaternion, Vector3};
     use scarp_slam::image::DepthImage;
 
     /// A camera at `eye` looking at `target` (z forward, y down in the image).
@@ -300,44 +330,62 @@ mod tests {
         )
     }
 
-    #[test]
-    fn sightings_of_a_sphere_find_its_centre() {
-        let camera = PinholeCamera::from_hfov(640, 480, 80.0).unwrap();
-        let (center, radius) = (Point3::new(3.0, -2.0, 1.0), 0.7);
-        // A stale sighting far off, then eight from around a circle, 55° down.
-        let stale = Sighting {
-            world_from_camera: looking_at(Point3::new(40.0, 0.0, 9.0), center),
-            bbox: BoundingBox::new(10.0, 10.0, 30.0, 30.0).unwrap(),
-            depth_m: 5.0,
-        };
-        let mut sightings = vec![stale];
-        for k in 0..8 {
-            let a = f64::from(k) * 0.2;
-            let eye =
-                center + Vector3::new(8.0 * a.cos(), 8.0 * a.sin(), 8.0 * 55f64.to_radians().tan());
-            let pose = looking_at(eye, center);
-            let in_camera = pose.inverse() * center;
-            let pixel = camera.project(&in_camera).unwrap();
-            let distance = in_camera.coords.norm();
-            sightings.push(Sighting {
-                world_from_camera: pose,
-                bbox: BoundingBox::new(
-                    pixel.x - 20.0,
-                    pixel.y - 15.0,
-                    pixel.x + 20.0,
-                    pixel.y + 15.0,
-                )
-                .unwrap(),
-                // The z-depth of the sphere's near point on the central ray.
-                depth_m: in_camera.z * (distance - radius) / distance,
-            });
+    /// z-depth of a sphere standing on the ground plane z = 0, ray-cast from `pose`.
+    fn sphere_on_ground(
+        camera: &PinholeCamera,
+        pose: &Isometry3<f64>,
+        center: &Point3<f64>,
+        radius: f64,
+    ) -> DepthImage {
+        let mut depth = DepthImage::filled(camera.width, camera.height, 0.0);
+        let eye = pose.translation.vector;
+        for v in 0..camera.height {
+            for u in 0..camera.width {
+                let ray_camera = camera.unproject(&Point2::new(f64::from(u), f64::from(v)), 1.0);
+                let ray = pose.rotation * ray_camera.coords;
+                let oc = eye - center.coords;
+                let (b, c) = (oc.dot(&ray), oc.norm_squared() - radius * radius);
+                let a = ray.norm_squared();
+                let disc = b * b - a * c;
+                let sphere_t = (disc >= 0.0)
+                    .then(|| (-b - disc.sqrt()) / a)
+                    .filter(|t| *t > 0.0);
+                let ground_t = (ray.z < 0.0).then(|| -eye.z / ray.z);
+                // The ray is scaled so that t is the z-depth.
+                if let Some(t) = sphere_t.or(ground_t) {
+                    *depth.get_mut(u, v).unwrap() = t as f32;
+                }
+            }
         }
-        let found = center_from_sightings(&camera, &sightings[1..], radius).unwrap();
-        assert!((found - center).norm() < 1e-9, "{found:?}");
-        // The median shrugs off the stale sighting.
-        let with_stale = center_from_sightings(&camera, &sightings, radius).unwrap();
-        assert!((with_stale - center).norm() < 1e-9, "{with_stale:?}");
-        assert!(center_from_sightings(&camera, &[], radius).is_none());
+        depth
+    }
+
+    #[test]
+    fn a_sphere_on_the_ground_is_found_from_above_and_from_the_side() {
+        let camera = PinholeCamera::from_hfov(320, 240, 80.0).unwrap();
+        let (center, radius) = (Point3::new(3.0, -2.0, 0.7), 0.7);
+        for (elevation_deg, azimuth) in [(55.0f64, 0.3f64), (20.0, 2.0), (40.0, -1.2)] {
+            let e = elevation_deg.to_radians();
+            let eye = center
+                + Vector3::new(azimuth.cos() * e.cos(), azimuth.sin() * e.cos(), e.sin()) * 5.0;
+            let pose = looking_at(eye, center);
+            let depth = sphere_on_ground(&camera, &pose, &center, radius);
+            let px = camera.project(&(pose.inverse() * center)).unwrap();
+            let r_px = radius / 5.0 * camera.fx * 1.2;
+            let bbox =
+                BoundingBox::new(px.x - r_px, px.y - r_px, px.x + r_px, px.y + r_px).unwrap();
+            let found = center_in_box(&camera, &depth, &pose, &bbox).unwrap();
+            let horizontal = (found.xy() - center.xy()).norm();
+            assert!(
+                horizontal < 0.1,
+                "{elevation_deg}°: {found:?} is {horizontal} m off"
+            );
+        }
+        // A box on bare ground holds no object.
+        let pose = looking_at(Point3::new(20.0, 0.0, 5.0), Point3::new(25.0, 0.0, 0.0));
+        let depth = sphere_on_ground(&camera, &pose, &center, radius);
+        let bbox = BoundingBox::new(140.0, 100.0, 180.0, 140.0).unwrap();
+        assert!(center_in_box(&camera, &depth, &pose, &bbox).is_none());
     }
 
     #[test]

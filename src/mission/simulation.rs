@@ -25,7 +25,7 @@ use super::mapping::{MappingSession, finish_target};
 use super::mode::{FlightLogEntry, Mode};
 use super::motion::MotionSystem;
 use super::mount::CameraMount;
-use super::perception::{Perception, center_from_sightings};
+use super::perception::{Perception, center_in_box};
 use super::report::{MissionReport, ModeChange, StageTimings};
 
 /// Frames tried (at the map camera rate: 1 s) to see the target before its map starts anyway
@@ -653,15 +653,11 @@ impl<'a> Mission<'a> {
         // A box centre further than a quarter of the image from the expected centre is
         // another object.
         let gate_px = 0.25 * f64::from(self.camera.width);
-        let sighting = self
+        let seen = self
             .perception
-            .sight_near(frame, &self.camera, estimate, &mid, gate_px)?
-            .filter(|s| {
-                s.bbox
-                    .is_inside_image(self.camera.width, self.camera.height, 2.0)
-            });
-        let seen = sighting
-            .and_then(|s| center_from_sightings(&self.camera, &[s], old.radius_m))
+            .detect_near(frame, &self.camera, estimate, &mid, gate_px)?
+            .filter(|b| b.is_inside_image(self.camera.width, self.camera.height, 2.0))
+            .and_then(|b| center_in_box(&self.camera, &frame.depth_m, estimate, &b))
             .map(|c| (c, (c.x - old.center_x_m).hypot(c.y - old.center_y_m)))
             .filter(|&(_, moved_m)| moved_m <= config.cylinder.max_recenter_m);
         let Some((seen, moved_m)) = seen else {
