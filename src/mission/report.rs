@@ -20,7 +20,8 @@ pub struct TargetReport {
     /// Localized centre C_e, world ENU metres.
     pub center: [f64; 3],
     /// Axis of the bounding cylinder flown around it (x, y), world ENU metres: C_e, or where
-    /// the latest boxes saw the target (`cylinder.recenter_sightings`).
+    /// the first mapped frame's box saw the target (`mapping.recenter_on_first_frame`), in the
+    /// map's frame.
     pub cylinder_center_xy: [f64; 2],
     /// The bounding cylinder's radius, metres.
     pub cylinder_radius_m: f64,
