@@ -315,20 +315,9 @@ impl Perception {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use nalgebra::{Point2, Translation3, UnitQuaternion, Vector3};
+    use nalgebra::{Point2, Vector3};
+    use scarp_slam::geometry::look_at;
     use scarp_slam::image::DepthImage;
-
-    /// A camera at `eye` looking at `target` (z forward, y down in the image).
-    fn looking_at(eye: Point3<f64>, target: Point3<f64>) -> Isometry3<f64> {
-        let z = (target - eye).normalize();
-        let x = z.cross(&Vector3::z()).normalize();
-        let y = z.cross(&x);
-        let rotation = nalgebra::Rotation3::from_basis_unchecked(&[x, y, z]);
-        Isometry3::from_parts(
-            Translation3::from(eye.coords),
-            UnitQuaternion::from_rotation_matrix(&rotation),
-        )
-    }
 
     /// z-depth of a sphere standing on the ground plane z = 0, ray-cast from `pose`.
     fn sphere_on_ground(
@@ -368,7 +357,7 @@ mod tests {
             let e = elevation_deg.to_radians();
             let eye = center
                 + Vector3::new(azimuth.cos() * e.cos(), azimuth.sin() * e.cos(), e.sin()) * 5.0;
-            let pose = looking_at(eye, center);
+            let pose = look_at(&eye, &center, &Vector3::z()).unwrap();
             let depth = sphere_on_ground(&camera, &pose, &center, radius);
             let px = camera.project(&(pose.inverse() * center)).unwrap();
             let r_px = radius / 5.0 * camera.fx * 1.2;
@@ -382,7 +371,12 @@ mod tests {
             );
         }
         // A box on bare ground holds no object.
-        let pose = looking_at(Point3::new(20.0, 0.0, 5.0), Point3::new(25.0, 0.0, 0.0));
+        let pose = look_at(
+            &Point3::new(20.0, 0.0, 5.0),
+            &Point3::new(25.0, 0.0, 0.0),
+            &Vector3::z(),
+        )
+        .unwrap();
         let depth = sphere_on_ground(&camera, &pose, &center, radius);
         let bbox = BoundingBox::new(140.0, 100.0, 180.0, 140.0).unwrap();
         assert!(center_in_box(&camera, &depth, &pose, &bbox).is_none());

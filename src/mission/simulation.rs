@@ -674,13 +674,7 @@ impl<'a> Mission<'a> {
         // The rings follow the cylinder, or the coverage it measures is flown off-centre.
         let clock = Instant::now();
         match self.fly_rings_around(&cylinder) {
-            Ok(rings) => {
-                if let Some(m) = self.targets.get_mut(&id) {
-                    m.report.base_ring_flown = rings.flies_base_ring();
-                    m.report.ring_repairs.clone_from(&rings.repairs);
-                }
-                self.ring_plan = Some(rings);
-            }
+            Ok(rings) => self.adopt_rings(id, rings),
             Err(e) => tracing::warn!(
                 "target {id}: the rings around the moved cylinder could not be planned ({e:#}); \
                  flying the first ones"
@@ -712,6 +706,15 @@ impl<'a> Mission<'a> {
         Ok(rings)
     }
 
+    /// Makes `rings` the plan the mount follows and records them in target `id`'s report.
+    fn adopt_rings(&mut self, id: u32, rings: RingPlan) {
+        if let Some(m) = self.targets.get_mut(&id) {
+            m.report.base_ring_flown = rings.flies_base_ring();
+            m.report.ring_repairs.clone_from(&rings.repairs);
+        }
+        self.ring_plan = Some(rings);
+    }
+
     fn start_mapping(&mut self, id: u32, timings: &mut StageTimings) -> anyhow::Result<()> {
         let Some(state) = self.perception.target_state(id) else {
             return self.resume_search(timings);
@@ -734,11 +737,7 @@ impl<'a> Mission<'a> {
         }
         match result {
             Ok(rings) => {
-                if let Some(m) = self.targets.get_mut(&id) {
-                    m.report.base_ring_flown = rings.flies_base_ring();
-                    m.report.ring_repairs.clone_from(&rings.repairs);
-                }
-                self.ring_plan = Some(rings);
+                self.adopt_rings(id, rings);
                 self.recenter_attempts = 0;
                 self.mapping = Some(MappingSession::new(
                     id,
