@@ -14,6 +14,7 @@
 // `!(x > 0.0)` is the NaN-rejecting form of `x <= 0.0`: bad input must fail the check.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod campaign;
 pub mod cli;
 pub mod detection;
 pub mod evaluation;

@@ -47,6 +47,7 @@ pub mod mesh;
 pub mod meshing;
 pub mod odometry;
 pub mod point_cloud;
+pub mod stats;
 pub mod tsdf;
 
 pub use error::SlamError;

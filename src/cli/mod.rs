@@ -2,6 +2,7 @@
 //! `run` function.
 
 pub mod ba;
+pub mod campaign;
 pub mod config;
 pub mod eval;
 pub mod fragility;
@@ -40,6 +41,9 @@ pub enum Command {
     Fragility(fragility::FragilityArgs),
     /// Run the simulated mission on a world (the main job).
     Simulate(simulate::SimulateArgs),
+    /// Run the mission over many worlds and seeds and tabulate every figure (`campaign.json`,
+    /// `campaign.md`); resumable, shardable (`--shard I/N`), `merge` joins shards.
+    Campaign(campaign::CampaignArgs),
     /// Evaluate outputs against the ground truth (`scarp eval mesh ...`, `scarp eval traj ...`).
     Eval(eval::EvalArgs),
     /// Track a sequence with RGBD odometry and write its trajectory.
@@ -73,6 +77,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Ba(args) => ba::run(args),
         Command::Fragility(args) => fragility::run(args),
         Command::Simulate(args) => simulate::run(args),
+        Command::Campaign(args) => campaign::run(args),
         Command::Eval(args) => eval::run(args),
         Command::Odometry(args) => odometry::run(args),
         Command::Localize(args) => localize::run(args),
