@@ -2,7 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::rock::{BoulderShape, PedestalShape};
+use crate::rock::{BlockShape, BoulderShape, PedestalShape};
 use crate::terrain::ProceduralTerrain;
 
 /// A whole world file.
@@ -155,15 +155,19 @@ impl RockRole {
     }
 }
 
-/// A rock's shape: `shape = { mesh = "file.ply" }` or `shape = { boulder = { … } }`.
+/// A rock's shape: `shape = { mesh = "file.ply" }`, `shape = { boulder = { … } }` or
+/// `shape = { block = { … } }`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum RockShape {
-    /// A mesh file (PLY or OBJ), relative to the world file, or `builtin:double_rock` for the
-    /// scanned PBR shipped with scarp.
+    /// A mesh file (PLY or OBJ), relative to the world file, or a built-in scan
+    /// (`builtin:double_rock`, `builtin:stone_e22`, …: see
+    /// [`BUILTIN_MESHES`](super::BUILTIN_MESHES)).
     Mesh(String),
-    /// A procedural boulder.
+    /// A procedural boulder: a lumpy ellipsoid.
     Boulder(BoulderShape),
+    /// A procedural block: a lumpy rounded box, for slabs, columns and squat blocks.
+    Block(BlockShape),
 }
 
 /// One rock.
@@ -177,10 +181,28 @@ pub struct RockConfig {
     /// Position of the rock's base (the pedestal axis, or the rock's contact) in world x, y,
     /// metres. z follows from the terrain.
     pub position_m: [f64; 2],
-    /// Rotation about the vertical axis, degrees counter-clockwise seen from above.
+    /// Rotation about the mesh's own vertical (z) axis, degrees counter-clockwise seen from
+    /// above. Applied first (after `mirror`), before the tilt.
     #[serde(default)]
     pub yaw_deg: f64,
-    /// Rock height after scaling, metres. The mesh is scaled uniformly to this height.
+    /// Tilt of the (yawed) mesh, degrees, in [−90, 90]: a rotation about the horizontal world
+    /// axis perpendicular to `tilt_azimuth_deg`, so that the rock's top leans toward that
+    /// azimuth (a negative tilt leans it the opposite way). 90 lays the mesh's vertical axis
+    /// flat, which stands a flat stone on its edge. Default 0.
+    #[serde(default)]
+    pub tilt_deg: f64,
+    /// Direction the tilted rock's top leans toward, degrees clockwise from north (0 north, 90
+    /// east), like the sun's azimuth and the scarp's strike. Default 0.
+    #[serde(default)]
+    pub tilt_azimuth_deg: f64,
+    /// Mirror the mesh across its own x–z plane (y → −y) before yaw and tilt, keeping it wound
+    /// outwards: a scan's mirror image, a new rock with the same fragility statistics.
+    /// Default false.
+    #[serde(default)]
+    pub mirror: bool,
+    /// Rock height after scaling, metres: the mesh is scaled uniformly so that its vertical
+    /// extent, once yawed and tilted, is this height (seating it on a pedestal then cuts a few
+    /// centimetres off its bottom).
     pub height_m: f64,
     /// The shape.
     pub shape: RockShape,

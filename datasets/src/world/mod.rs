@@ -13,10 +13,10 @@ pub use config::{
     DemTerrain, GeodeticOrigin, RockConfig, RockRole, RockShape, Sun, TerrainConfig, TextureConfig,
     WorldConfig,
 };
-pub use mesh_source::{DOUBLE_ROCK_PLY, load_mesh};
+pub use mesh_source::{BUILTIN_MESHES, BuiltinMesh, DOUBLE_ROCK_PLY, builtin_mesh, load_mesh};
 
 use crate::DatasetError;
-use crate::rock::{Contact, seat_on_flat_contact};
+use crate::rock::{Contact, mirror_y, seat_on_flat_contact};
 use crate::terrain::Heightfield;
 use crate::texture::AlbedoMap;
 
@@ -247,27 +247,64 @@ fn place_rock(
             "must be positive",
         ));
     }
+    if !(rock.tilt_deg.abs() <= 90.0) {
+        return Err(DatasetError::invalid(
+            format!("{key}.tilt_deg"),
+            format!("{} must lie in [-90, 90]", rock.tilt_deg),
+        ));
+    }
+    if !rock.tilt_azimuth_deg.is_finite() {
+        return Err(DatasetError::invalid(
+            format!("{key}.tilt_azimuth_deg"),
+            "must be finite",
+        ));
+    }
     let mut mesh = match &rock.shape {
         RockShape::Mesh(source) => load_mesh(source, base_dir)?,
         RockShape::Boulder(b) => b.mesh(&format!("{key}.shape.boulder"))?,
+        RockShape::Block(b) => b.mesh(&format!("{key}.shape.block"))?,
     };
     mesh.normals.clear();
     mesh.colors.clear();
-    let (lo, hi) = mesh
-        .bounds()
-        .ok_or_else(|| DatasetError::invalid(format!("{key}.shape"), "the mesh has no vertices"))?;
-    let native_height = f64::from(hi.z - lo.z);
+    if rock.mirror {
+        mirror_y(&mut mesh);
+    }
+    let flat_error = || DatasetError::invalid(format!("{key}.shape"), "the mesh is flat");
+    let vertical_extent = |mesh: &TriangleMesh| {
+        mesh.bounds()
+            .map(|(lo, hi)| f64::from(hi.z - lo.z))
+            .ok_or_else(|| {
+                DatasetError::invalid(format!("{key}.shape"), "the mesh has no vertices")
+            })
+    };
+    let native_height = vertical_extent(&mesh)?;
     if native_height <= 0.0 {
-        return Err(DatasetError::invalid(
-            format!("{key}.shape"),
-            "the mesh is flat",
-        ));
+        return Err(flat_error());
     }
     mesh.scale((rock.height_m / native_height) as f32);
-    mesh.transform(&Isometry3::from_parts(
-        Translation3::identity(),
-        UnitQuaternion::from_axis_angle(&Vector3::z_axis(), rock.yaw_deg.to_radians()),
-    ));
+    let yaw = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), rock.yaw_deg.to_radians());
+    if rock.tilt_deg == 0.0 {
+        mesh.transform(&Isometry3::from_parts(Translation3::identity(), yaw));
+    } else {
+        // Yaw about the mesh's own vertical, then the tilt in the world frame: the top (+z)
+        // turns toward the lean direction u about the horizontal axis z × u. Both in f64 and
+        // rounded once, so vertices level before the tilt stay exactly level together.
+        let azimuth = rock.tilt_azimuth_deg.to_radians();
+        let axis = Vector3::z().cross(&Vector3::new(azimuth.sin(), azimuth.cos(), 0.0));
+        let tilt = UnitQuaternion::from_axis_angle(
+            &nalgebra::Unit::new_normalize(axis),
+            rock.tilt_deg.to_radians(),
+        );
+        let rotation = tilt * yaw;
+        for p in &mut mesh.positions {
+            *p = (rotation * p.cast::<f64>()).cast();
+        }
+        let tilted_height = vertical_extent(&mesh)?;
+        if tilted_height <= 0.0 {
+            return Err(flat_error());
+        }
+        mesh.scale((rock.height_m / tilted_height) as f32);
+    }
     let (mut mesh, pedestal, contact) = match &rock.pedestal {
         Some(pedestal) => {
             pedestal.validate(&format!("{key}.pedestal"))?;
@@ -305,13 +342,19 @@ fn place_rock(
             let foot_z = (0..16)
                 .map(|k| {
                     let a = f64::from(k) / 16.0 * std::f64::consts::TAU;
-                    let r = pedestal.base_radius_m;
+                    let r = pedestal.footprint_radius_m();
                     heightfield
                         .height_at(x + r * a.cos(), y + r * a.sin())
                         .unwrap_or(ground_z)
                 })
                 .fold(ground_z, f64::min);
-            let pedestal_mesh = pedestal.mesh([x, y], foot_z, top_z, u64::from(rock.id));
+            let pedestal_mesh = pedestal.build(
+                &format!("{key}.pedestal"),
+                [x, y],
+                foot_z,
+                top_z,
+                u64::from(rock.id),
+            )?;
             let mut seated = seated;
             seated.transform(&Isometry3::translation(x, y, top_z));
             let contact = Contact {
