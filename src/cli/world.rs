@@ -12,7 +12,8 @@ use scarp_export::ply::{PlyEncoding, write_mesh};
 /// `world.json`.
 #[derive(Debug, Args)]
 pub struct WorldArgs {
-    /// `default` for the built-in world, or a world TOML file.
+    /// A built-in world (`default`, `library-a`, `library-b`: see
+    /// `scarp_datasets::world::BUILTIN_WORLDS`), or a world TOML file.
     #[arg(long, default_value = "default")]
     pub world: String,
     /// Output directory.

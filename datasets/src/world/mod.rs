@@ -28,6 +28,26 @@ pub const STABILITY_MARGIN_FRACTION: f64 = 0.25;
 /// The built-in default world's TOML.
 pub const DEFAULT_WORLD_TOML: &str = include_str!("default.toml");
 
+/// The built-in worlds, by name, with their TOML (the files beside this module):
+/// - `default`: 120 m of fault scarp, three targets (the double rock and two boulders) and twelve
+///   distractors;
+/// - `library-a`: 80 m of steeper scarp, four targets from the rock library (the double rock in
+///   its scanned pose, a scanned slab stood on its edge, a tall column, a scanned elongated
+///   stone) and distractors, one of them beside a target;
+/// - `library-b`: 80 m of steeper scarp, the rest of the library (the mirrored double rock, a
+///   wide squat block, a boulder resting on a boulder, a scanned blocky stone) and distractors,
+///   one target near the scarp's slope.
+pub const BUILTIN_WORLDS: &[(&str, &str)] = &[
+    ("default", DEFAULT_WORLD_TOML),
+    ("library-a", include_str!("library-a.toml")),
+    ("library-b", include_str!("library-b.toml")),
+];
+
+/// The names of the built-in worlds (see [`BUILTIN_WORLDS`]).
+pub fn builtin_world_names() -> impl Iterator<Item = &'static str> {
+    BUILTIN_WORLDS.iter().map(|(name, _)| *name)
+}
+
 /// Instance ids written to masks: 0 is no surface (sky), a rock's id (1–999) is that rock,
 /// 1000 + id is its pedestal, and [`TERRAIN_INSTANCE_ID`] is the terrain.
 pub const PEDESTAL_INSTANCE_OFFSET: u16 = 1000;
@@ -108,13 +128,37 @@ impl World {
         )
     }
 
-    /// `default` for the built-in world, otherwise a world file path.
+    /// Builds the built-in world called `name` (one of [`BUILTIN_WORLDS`]).
+    ///
+    /// # Errors
+    /// [`DatasetError::Invalid`] for an unknown name (the message lists the built-in ones);
+    /// otherwise only if a built-in description were broken, which a test guards.
+    pub fn builtin(name: &str) -> Result<Self, DatasetError> {
+        let Some((_, text)) = BUILTIN_WORLDS.iter().find(|(n, _)| *n == name) else {
+            return Err(DatasetError::invalid(
+                "world",
+                format!(
+                    "`{name}` is not a built-in world (built in: {})",
+                    builtin_world_names().collect::<Vec<_>>().join(", ")
+                ),
+            ));
+        };
+        Self::from_toml_str(
+            text,
+            Path::new(&format!("<built-in {name} world>")),
+            Path::new("."),
+        )
+    }
+
+    /// The built-in world of that name (`default`, `library-a`, `library-b`: see
+    /// [`BUILTIN_WORLDS`]), otherwise a world file path. A built-in name wins over a file of
+    /// the same name in the working directory; write `./library-a` for the file.
     ///
     /// # Errors
     /// As [`Self::load`].
     pub fn from_name_or_path(name: &str) -> Result<Self, DatasetError> {
-        if name == "default" {
-            Self::builtin_default()
+        if builtin_world_names().any(|n| n == name) {
+            Self::builtin(name)
         } else {
             Self::load(Path::new(name))
         }
