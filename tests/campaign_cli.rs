@@ -76,12 +76,20 @@ fn small_world_campaign_tabulates_its_missions_and_resumes() {
     let out = dir.path().join("campaign");
     let world = data("small_world.toml");
     let config = data("small_mission.toml");
+    // An earlier, interrupted campaign: seed 2 finished (a hand-made run, so that the test
+    // flies only two missions), seed 1 was interrupted half-way, seed 0 never started.
+    fake_run(&out.join("runs/small_world/seed-2"), 2);
+    let seed2_before = std::fs::read(out.join("runs/small_world/seed-2/mission.json")).unwrap();
+    let seed1 = out.join("runs/small_world/seed-1");
+    std::fs::create_dir_all(&seed1).unwrap();
+    std::fs::write(seed1.join("mission.json"), r#"{"interrupted": true}"#).unwrap();
+    std::fs::write(seed1.join("stale.txt"), "from the interrupted attempt").unwrap();
     let args = [
         "campaign",
         "--worlds",
         &world,
         "--seeds",
-        "0-1",
+        "0-2",
         "--jobs",
         "2",
         "--config",
@@ -90,12 +98,25 @@ fn small_world_campaign_tabulates_its_missions_and_resumes() {
         path_str(&out),
         "--json",
     ];
-    let totals: serde_json::Value =
-        serde_json::from_slice(&scarp_ok(&args).stdout).expect("totals on stdout");
-    assert_eq!(totals["runs"], 2, "{totals:#}");
-    assert_eq!(totals["runs_finished"], 2, "{totals:#}");
+    let run = scarp_ok(&args);
+    let log = String::from_utf8_lossy(&run.stderr);
+    assert!(log.contains("1 already finished, 2 to run"), "{log}");
+    let totals: serde_json::Value = serde_json::from_slice(&run.stdout).expect("totals on stdout");
+    assert_eq!(totals["runs"], 3, "{totals:#}");
+    assert_eq!(totals["runs_finished"], 3, "{totals:#}");
     // One true target per run.
-    assert_eq!(totals["targets_flown"]["of"], 2, "{totals:#}");
+    assert_eq!(totals["targets_flown"]["of"], 3, "{totals:#}");
+    // The finished run was left alone; the interrupted one ran again from a clean folder.
+    assert_eq!(
+        std::fs::read(out.join("runs/small_world/seed-2/mission.json")).unwrap(),
+        seed2_before
+    );
+    assert_eq!(read_json(&seed1.join("mission.json"))["interrupted"], false);
+    assert!(
+        !seed1.join("stale.txt").exists(),
+        "the retried run starts clean"
+    );
+    assert!(seed1.join("run.log").is_file());
     assert_rows_match_missions(&out);
     let campaign = read_json(&out.join("campaign.json"));
     assert_eq!(campaign["totals"], totals);
@@ -105,32 +126,13 @@ fn small_world_campaign_tabulates_its_missions_and_resumes() {
             .unwrap()
             .contains("search_height_agl_m")
     );
-
-    // Interrupt seed 1 after the fact: it must run again, and seed 0 must be left alone.
-    let seed0 = out.join("runs/small_world/seed-0/mission.json");
-    let seed1 = out.join("runs/small_world/seed-1");
-    let seed0_before = std::fs::read(&seed0).unwrap();
-    let mut interrupted = read_json(&seed1.join("mission.json"));
-    interrupted["interrupted"] = serde_json::Value::Bool(true);
-    std::fs::write(seed1.join("mission.json"), interrupted.to_string()).unwrap();
-    std::fs::write(seed1.join("stale.txt"), "from the interrupted attempt").unwrap();
-    let resumed = scarp_ok(&args);
-    let log = String::from_utf8_lossy(&resumed.stderr);
-    assert!(log.contains("1 already finished, 1 to run"), "{log}");
+    // Run again: nothing left to fly, the same tables.
+    let again = scarp_ok(&args);
+    assert!(String::from_utf8_lossy(&again.stderr).contains("3 already finished, 0 to run"));
     assert_eq!(
-        std::fs::read(&seed0).unwrap(),
-        seed0_before,
-        "seed 0 was run again"
+        read_json(&out.join("campaign.json"))["targets"],
+        campaign["targets"]
     );
-    assert_eq!(read_json(&seed1.join("mission.json"))["interrupted"], false);
-    assert!(
-        !seed1.join("stale.txt").exists(),
-        "the retried run starts clean"
-    );
-    assert_rows_match_missions(&out);
-    // Determinism: the re-run gives the same targets' figures.
-    let again = read_json(&out.join("campaign.json"));
-    assert_eq!(again["targets"], campaign["targets"]);
 
     // The same folder with another configuration is refused.
     let other = dir.path().join("other.toml");
@@ -143,9 +145,8 @@ fn small_world_campaign_tabulates_its_missions_and_resumes() {
     assert!(err.contains("another configuration"), "{err}");
 }
 
-/// A hand-made finished run: a world with one target, a mission that mapped it.
-fn fake_run(campaign: &Path, seed: u64) {
-    let run = campaign.join(format!("runs/w/seed-{seed}"));
+/// A hand-made finished run in `run`: a world with one target, a mission that mapped it.
+fn fake_run(run: &Path, seed: u64) {
     std::fs::create_dir_all(run.join("world_gt")).unwrap();
     std::fs::write(
         run.join("world_gt/world.json"),
@@ -175,8 +176,10 @@ fn shards_merge_into_the_unsharded_tables() {
     );
     // The same runs, as one folder and as the two shards' folders (seed 0, 2, 4 / 1, 3).
     for seed in 0..5 {
-        fake_run(&whole, seed);
-        fake_run(if seed % 2 == 0 { &shard0 } else { &shard1 }, seed);
+        let run = format!("runs/w/seed-{seed}");
+        fake_run(&whole.join(&run), seed);
+        let shard = if seed % 2 == 0 { &shard0 } else { &shard1 };
+        fake_run(&shard.join(&run), seed);
     }
     let tabulate = |out: &Path, shard: Option<&str>| {
         let mut args = vec![
@@ -228,7 +231,7 @@ fn shards_merge_into_the_unsharded_tables() {
     // A merge of folders run with different configurations is refused.
     std::fs::write(dir.path().join("c.toml"), "search_height_agl_m = 13.0\n").unwrap();
     let other = dir.path().join("other");
-    fake_run(&other, 0);
+    fake_run(&other.join("runs/w/seed-0"), 0);
     scarp_ok(&[
         "campaign",
         "--worlds",

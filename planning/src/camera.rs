@@ -9,7 +9,7 @@ use crate::error::{PlanError, check_positive, check_range};
 
 /// Camera geometry used for planning.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct CameraConfig {
     /// Angle γ between the optical axis and the horizontal plane, positive down (degrees).
     /// Default 55° (paper §V, DESIGN defaults).

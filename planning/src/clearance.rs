@@ -23,7 +23,7 @@ use crate::terrain_distance::TerrainDistance;
 
 /// Tunables of the clearance checks and repairs.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct ClearanceConfig {
     /// Minimum distance from terrain and obstacles (m). Default 1.5 (issue 8).
     pub min_clearance_m: f64,

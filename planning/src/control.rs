@@ -14,7 +14,7 @@ use crate::minsnap::{FlatState, Trajectory};
 
 /// Controller gains and limits.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct ControllerConfig {
     /// Position gain K_p per world axis (1/s²). Default (8, 8, 20) (DESIGN; paper's controller).
     pub position_gain_per_s2: [f64; 3],

@@ -27,7 +27,7 @@ pub enum FootprintRow {
 
 /// Tunables of the lawn-mower pattern.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct CoverageConfig {
     /// Side overlap between neighbouring lanes' footprints (fraction). Default 0.3 (issue 8).
     pub side_overlap: f64,

@@ -12,7 +12,7 @@ use crate::error::{PlanError, check_finite, check_positive, check_range};
 
 /// Physical parameters of the vehicle. Defaults approximate a 3DR Iris (the paper's vehicle).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct QuadrotorParams {
     /// Mass (kg). Default 1.5.
     pub mass_kg: f64,
@@ -162,7 +162,7 @@ pub struct ActuatorCommand {
 
 /// Wind model: a constant mean plus an Ornstein–Uhlenbeck gust per axis.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct WindConfig {
     /// Mean wind (world, m/s). Default zero.
     pub mean_mps: [f64; 3],

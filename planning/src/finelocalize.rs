@@ -20,7 +20,7 @@ use crate::geometry::{Path, PointSetPca, Waypoint, unwrap_near, wrap_angle};
 
 /// Tunables of the fine-localization path.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct FineLocalizeConfig {
     /// Waypoints on the circle. Default 25 (DESIGN defaults; the seed code's N).
     pub waypoints: usize,

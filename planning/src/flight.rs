@@ -14,7 +14,7 @@ use crate::minsnap::Trajectory;
 
 /// Simulation settings.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct FlightConfig {
     /// Airframe.
     pub quad: QuadrotorParams,

@@ -72,7 +72,7 @@ use serde::{Deserialize, Serialize};
 
 /// Every tunable of the crate, grouped by module; `Default` gives the documented defaults.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct PlanningConfig {
     /// The forward camera.
     pub camera: camera::CameraConfig,

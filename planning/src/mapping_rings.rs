@@ -23,7 +23,7 @@ use crate::geometry::{Path, VerticalCylinder, Waypoint, unwrap_near, yaw_toward}
 
 /// Tunables of the mapping rings.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct MappingRingConfig {
     /// Horizontal standoff r_m between the ring and the cylinder surface (m). Default 1.5
     /// (DESIGN defaults; the seed code's `dist`).
@@ -55,7 +55,7 @@ pub struct MappingRingConfig {
 /// pitched almost level, so the neck is seen from the side. It is flown first, and the camera
 /// mount's pitch slews from it to γ as the vehicle climbs to the first of the paper's rings.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct BaseRingConfig {
     /// Fly the base ring. Default true.
     pub enabled: bool,

@@ -42,7 +42,7 @@ type Vec10 = SVector<f64, POLY_COEFFS>;
 
 /// Tunables of trajectory generation.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct MinSnapConfig {
     /// Speed limit v_max (m/s). Default 1.0 (paper §V; DESIGN defaults).
     pub max_speed_mps: f64,

@@ -19,7 +19,7 @@ use crate::mapping_rings::Ring;
 
 /// Image settings.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct PlotConfig {
     /// Image width (pixels). Default 800.
     pub width_px: u32,

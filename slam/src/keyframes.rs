@@ -9,7 +9,7 @@ use crate::image::DepthImage;
 
 /// Keyframe thresholds. A frame is a keyframe when any one is crossed.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct KeyframeConfig {
     /// Camera translation since the last keyframe, metres. Default 0.5 m (about a tenth of the
     /// 4 m mapping stand-off).

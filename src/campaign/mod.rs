@@ -10,7 +10,7 @@
 //!
 //! - [`plan`]: which runs a campaign (or one shard of it) holds, and where they live.
 //! - [`table`]: one row per true target per run, and the totals.
-//! - [`markdown`]: `campaign.md`.
+//! - [`markdown`]: renders `campaign.md`.
 //!
 //! ```
 //! use scarp::campaign::plan::{parse_seeds, plan_runs, Shard};

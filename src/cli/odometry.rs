@@ -50,7 +50,7 @@ pub enum ReferenceMode {
 
 /// Settings of [`track_sequence`], readable from TOML.
 #[derive(Debug, Clone, Default, PartialEq, serde::Deserialize, Serialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct SequenceOdometryConfig {
     /// The odometry.
     pub odometry: OdometryConfig,

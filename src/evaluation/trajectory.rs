@@ -31,7 +31,7 @@ pub enum Alignment {
 
 /// Settings of [`evaluate_trajectory`].
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct TrajectoryEvalConfig {
     /// Largest timestamp difference of an associated pair, seconds. Default 0.02 s (TUM).
     pub max_dt_s: f64,

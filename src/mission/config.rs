@@ -289,4 +289,38 @@ mod tests {
             .to_string();
         assert!(err.contains("coverage.threshold"), "{err}");
     }
+
+    /// Every table of the configuration, however deep (`[planning.min_snap]`, …), refuses a key
+    /// it does not know, naming it: a misspelt key must never be silently ignored.
+    #[test]
+    fn every_table_denies_unknown_keys() {
+        fn table_paths(table: &toml::Table, prefix: &[String], out: &mut Vec<Vec<String>>) {
+            out.push(prefix.to_vec());
+            for (key, value) in table {
+                if let toml::Value::Table(sub) = value {
+                    let mut path = prefix.to_vec();
+                    path.push(key.clone());
+                    table_paths(sub, &path, out);
+                }
+            }
+        }
+        let defaults: toml::Table =
+            toml::from_str(&toml::to_string_pretty(&MissionConfig::default()).unwrap()).unwrap();
+        let mut paths = Vec::new();
+        table_paths(&defaults, &[], &mut paths);
+        assert!(paths.len() > 10, "{paths:?}");
+        for path in paths {
+            let mut config = defaults.clone();
+            let mut table = &mut config;
+            for key in &path {
+                table = table.get_mut(key).unwrap().as_table_mut().unwrap();
+            }
+            table.insert("misspelt_key_zq".into(), toml::Value::Integer(1));
+            let text = toml::to_string(&config).unwrap();
+            let err = MissionConfig::from_toml_str(&text, "m.toml")
+                .err()
+                .unwrap_or_else(|| panic!("[{}] accepted an unknown key", path.join(".")));
+            assert!(err.to_string().contains("misspelt_key_zq"), "{err}");
+        }
+    }
 }

@@ -7,7 +7,7 @@ use serde::{Deserialize, Serialize};
 /// The solver uses iteratively reweighted least squares: residual and Jacobians are scaled by
 /// √ρ′(s) at the current estimate.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Default)]
-#[serde(tag = "kind", rename_all = "snake_case")]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
 pub enum RobustLoss {
     /// Plain least squares, ρ(s) = s.
     #[default]

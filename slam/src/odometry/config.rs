@@ -9,7 +9,7 @@ use super::OdometryError;
 /// 2–20 m ranges of a PBR orbit; they follow Kerl et al. (DVO, 2013) for the photometric part and
 /// KinectFusion (Newcombe et al., 2011) for the point-to-plane part.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct OdometryConfig {
     /// Pyramid levels (≥ 3; level 0 is full resolution). Default 4: the coarsest level
     /// (80×60) absorbs initial-guess errors of a few degrees.
