@@ -12,6 +12,11 @@ use super::table::{
 /// How many rows each worst-case list shows.
 const WORST_ROWS: usize = 5;
 
+/// A table cell: `|` would end the cell, so it is escaped.
+fn cell(text: &str) -> String {
+    text.replace('|', "\\|")
+}
+
 fn num(v: Option<f64>, digits: usize) -> String {
     v.map_or_else(|| "–".into(), |v| format!("{v:.digits$}"))
 }
@@ -118,7 +123,7 @@ pub fn render(report: &CampaignReport) -> String {
         ),
     ];
     for (what, result) in rows {
-        let _ = writeln!(md, "| {what} | {result} |");
+        let _ = writeln!(md, "| {} | {} |", cell(&what), cell(&result));
     }
 
     let _ = writeln!(
@@ -129,7 +134,7 @@ pub fn render(report: &CampaignReport) -> String {
         let _ = writeln!(
             md,
             "| {} | {} | {} | {} | {} | {} | {} |",
-            f.name,
+            cell(&f.name),
             f.n,
             num(f.median, 3),
             num(f.p10, 3),
@@ -300,7 +305,7 @@ fn worst_cases(md: &mut String, report: &CampaignReport) {
 fn per_world(md: &mut String, report: &CampaignReport) {
     let _ = writeln!(
         md,
-        "\n## Per world\n\n| world | runs finished | targets mapped | F@2cm ≥ {FSCORE_2CM_MIN} | |α error| ≤ {ALPHA_ERROR_MAX_DEG}° | runs without collision | median run wall time (s) |\n|---|---|---|---|---|---|---|"
+        "\n## Per world\n\n| world | runs finished | targets mapped | F@2cm ≥ {FSCORE_2CM_MIN} | \\|α error\\| ≤ {ALPHA_ERROR_MAX_DEG}° | runs without collision | median run wall time (s) |\n|---|---|---|---|---|---|---|"
     );
     for world in &report.worlds {
         let runs: Vec<_> = report

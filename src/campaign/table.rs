@@ -36,8 +36,10 @@ pub enum RunState {
     Finished,
     /// `mission.json` says the mission was interrupted (Ctrl-C).
     Interrupted,
-    /// The folder exists but holds no `mission.json`: the run failed (see its `run.log`).
+    /// The mission exited with an error and wrote no `mission.json` (see its `run.log`).
     Failed,
+    /// Started, but neither finished nor failed: running now, or killed.
+    Started,
     /// The run has not been started.
     NotRun,
 }
@@ -226,6 +228,10 @@ fn s(v: &Value, key: &str) -> Option<String> {
     v.get(key).and_then(Value::as_str).map(str::to_string)
 }
 
+/// The file a campaign writes into a run's folder when its mission exits with an error; it
+/// holds the exit status.
+pub const FAILED_MARKER: &str = "failed.txt";
+
 /// The last `error:` line of a failed run's `run.log`.
 fn failure_message(run_dir: &Path) -> Option<String> {
     let log = std::fs::read_to_string(run_dir.join("run.log")).ok()?;
@@ -273,7 +279,8 @@ pub fn read_run(
     };
     let state = match &mission {
         _ if !dir.exists() => RunState::NotRun,
-        None => RunState::Failed,
+        None if dir.join(FAILED_MARKER).is_file() => RunState::Failed,
+        None => RunState::Started,
         Some(_) if run_is_finished(&dir) => RunState::Finished,
         Some(_) => RunState::Interrupted,
     };
@@ -664,7 +671,14 @@ mod tests {
         let failed = dir.path().join(runs[2].dir());
         std::fs::remove_file(failed.join("mission.json")).unwrap();
         std::fs::write(failed.join("run.log"), "starting\nerror: the world broke\n").unwrap();
-        // Seed 3 never ran.
+        std::fs::write(failed.join(FAILED_MARKER), "exit status: 1").unwrap();
+        // Seed 3 never ran; seed 4 is running.
+        let mut runs = runs;
+        runs.push(RunSpec {
+            world: "w.toml".into(),
+            seed: 4,
+        });
+        std::fs::create_dir_all(dir.path().join(runs[4].dir())).unwrap();
         let (run_rows, rows) = read_runs(dir.path(), &runs).unwrap();
         assert_eq!(
             run_rows.iter().map(|r| r.state).collect::<Vec<_>>(),
@@ -672,7 +686,8 @@ mod tests {
                 RunState::Finished,
                 RunState::Finished,
                 RunState::Failed,
-                RunState::NotRun
+                RunState::NotRun,
+                RunState::Started
             ]
         );
         assert_eq!(run_rows[2].error.as_deref(), Some("error: the world broke"));
@@ -704,7 +719,7 @@ mod tests {
         assert_eq!(rows[4].status, "run_failed");
 
         let t = totals(&run_rows, &rows);
-        assert_eq!((t.runs, t.runs_finished, t.runs_unfinished), (4, 2, 2));
+        assert_eq!((t.runs, t.runs_finished, t.runs_unfinished), (5, 2, 3));
         assert_eq!(t.runs_without_collision, Rate::new(1, 2));
         assert_eq!(t.collisions_total, 12);
         assert_eq!(

@@ -15,7 +15,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use crate::campaign::plan::{
     RunSpec, Shard, parse_seeds, parse_worlds, plan_runs, run_is_finished,
 };
-use crate::campaign::table::RunState;
+use crate::campaign::table::{FAILED_MARKER, RunState};
 use crate::campaign::{CAMPAIGN_JSON, CampaignReport};
 
 /// Run the mission over many worlds and seeds and tabulate every figure (`campaign.json`,
@@ -148,7 +148,7 @@ pub fn run(args: CampaignArgs) -> anyhow::Result<()> {
     };
 
     let mut report = CampaignReport::collect(&out, plan, config_toml, shard)?;
-    report.wall_time_s = Some(started.elapsed().as_secs_f64());
+    report.wall_time_s = (!args.tabulate_only).then(|| started.elapsed().as_secs_f64());
     report.write(&out)?;
     if args.json {
         println!("{}", serde_json::to_string_pretty(&report.totals)?);
@@ -157,7 +157,7 @@ pub fn run(args: CampaignArgs) -> anyhow::Result<()> {
     let unfinished = report
         .runs
         .iter()
-        .filter(|r| r.state != RunState::Finished && r.state != RunState::NotRun)
+        .filter(|r| r.state == RunState::Failed || r.state == RunState::Interrupted)
         .count();
     if failures > 0 || unfinished > 0 {
         bail!(
@@ -320,6 +320,11 @@ fn run_one(
     if status.success() && run_is_finished(&dir) {
         Ok(started.elapsed().as_secs_f64())
     } else {
+        if !dir.join("mission.json").is_file() {
+            let marker = dir.join(FAILED_MARKER);
+            std::fs::write(&marker, format!("{status}\n"))
+                .map_err(|e| format!("writing {}: {e}", marker.display()))?;
+        }
         let tail = std::fs::read_to_string(&log_path)
             .ok()
             .and_then(|l| {
