@@ -218,6 +218,32 @@ pub struct RockConfig {
     pub embed_fraction: f64,
 }
 
+impl RockConfig {
+    /// A short description of the rock's shape for tables: the mesh source, or the procedural
+    /// kind with its proportions (height over the larger horizontal extent), then the pose
+    /// changes, e.g. `builtin:double_rock, mirrored` or `block 0.35×1.0×0.8, tilt 12°`.
+    pub fn shape_label(&self) -> String {
+        let fmt3 = |v: [f64; 3]| format!("{:.2}×{:.2}×{:.2}", v[0], v[1], v[2]);
+        let mut label = match &self.shape {
+            RockShape::Mesh(source) => source.clone(),
+            RockShape::Boulder(b) => format!("boulder {}", fmt3(b.radii_m)),
+            RockShape::Block(b) => format!("block {}", fmt3(b.size_m)),
+        };
+        if self.mirror {
+            label.push_str(", mirrored");
+        }
+        if self.tilt_deg != 0.0 {
+            label.push_str(&format!(", tilt {:.0}°", self.tilt_deg));
+        }
+        if let Some(p) = &self.pedestal
+            && p.boulder.is_some()
+        {
+            label.push_str(", on a boulder");
+        }
+        label
+    }
+}
+
 fn default_contact_radius() -> f64 {
     0.15
 }

@@ -107,6 +107,8 @@ pub struct RockSummary {
     pub volume_m3: f64,
     /// The rock's PLY file name in the same folder.
     pub mesh: String,
+    /// Its shape, as [`RockConfig::shape_label`] describes it.
+    pub shape: String,
     /// The pedestal's PLY file name, if any.
     pub pedestal_mesh: Option<String>,
     /// Basal contact, if any.
@@ -262,6 +264,12 @@ impl World {
                 height_m: r.height_m,
                 volume_m3: r.volume_m3,
                 mesh: format!("rock_{}.ply", r.id),
+                shape: self
+                    .config
+                    .rocks
+                    .iter()
+                    .find(|c| c.id == r.id)
+                    .map_or_else(String::new, RockConfig::shape_label),
                 pedestal_mesh: r
                     .pedestal
                     .as_ref()
