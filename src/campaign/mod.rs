@@ -114,6 +114,29 @@ pub struct CampaignReport {
     pub targets: Vec<TargetRow>,
 }
 
+/// What resuming and merging need of an existing `campaign.json`: its configuration and its
+/// plan. Read on its own so that a folder tabulated by another scarp version (whose totals
+/// have other fields) still resumes and merges.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+pub struct CampaignHeader {
+    /// The mission configuration every run used (`None`: the defaults).
+    pub config_toml: Option<String>,
+    /// The runs the folder holds.
+    pub plan: Vec<RunSpec>,
+}
+
+impl CampaignHeader {
+    /// Reads the header of `dir/campaign.json`.
+    ///
+    /// # Errors
+    /// A missing or malformed file, naming it.
+    pub fn read(dir: &Path) -> Result<Self, CampaignError> {
+        let path = dir.join(CAMPAIGN_JSON);
+        let bytes = std::fs::read(&path).map_err(|e| CampaignError::io(&path, e))?;
+        serde_json::from_slice(&bytes).map_err(|e| CampaignError::json(&path, e))
+    }
+}
+
 /// The file names a campaign folder holds besides `runs/`.
 pub const CAMPAIGN_JSON: &str = "campaign.json";
 /// The human-readable tables.

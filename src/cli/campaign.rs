@@ -16,7 +16,7 @@ use crate::campaign::plan::{
     RunSpec, Shard, parse_seeds, parse_worlds, plan_runs, run_is_finished,
 };
 use crate::campaign::table::{FAILED_MARKER, RunState};
-use crate::campaign::{CAMPAIGN_JSON, CampaignReport};
+use crate::campaign::{CAMPAIGN_JSON, CampaignHeader, CampaignReport};
 
 /// Run the mission over many worlds and seeds and tabulate every figure (`campaign.json`,
 /// `campaign.md`). Finished runs are skipped, so an interrupted campaign resumes where it
@@ -174,7 +174,7 @@ fn check_same_config(out: &Path, config_toml: Option<&str>) -> anyhow::Result<()
     if !out.join(CAMPAIGN_JSON).is_file() {
         return Ok(());
     }
-    let previous = CampaignReport::read(out)?;
+    let previous = CampaignHeader::read(out)?;
     if previous.config_toml.as_deref() != config_toml {
         bail!(
             "{} was run with {} configuration; resume it with the same --config, or use a new --out",
@@ -386,7 +386,7 @@ fn merge(args: MergeArgs) -> anyhow::Result<()> {
     let mut plan: Vec<RunSpec> = Vec::new();
     let mut source: Vec<PathBuf> = Vec::new();
     for dir in &args.dirs {
-        let part = CampaignReport::read(dir)?;
+        let part = CampaignHeader::read(dir)?;
         match &config {
             None => config = Some(part.config_toml.clone()),
             Some(c) if *c != part.config_toml => bail!(
