@@ -17,7 +17,7 @@ use serde::Serialize;
 /// Plan and fly the mapping rings around a target.
 #[derive(Debug, Args)]
 pub struct PlanArgs {
-    /// `default` for the built-in world, or a world TOML file.
+    /// A built-in world (`default`, `library-a`, `library-b`) or a world TOML file.
     #[arg(long, default_value = "default")]
     pub world: String,
     /// A rock id of the world, or a point `x,y,z` (world metres, z at the target's base).

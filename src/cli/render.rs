@@ -20,7 +20,7 @@ use scarp_slam::geometry::look_at;
 /// Render a sequence (RGB, depth, instance masks, true and estimated poses, boxes).
 #[derive(Debug, Args)]
 pub struct RenderArgs {
-    /// `default` for the built-in world, or a world TOML file.
+    /// A built-in world (`default`, `library-a`, `library-b`) or a world TOML file.
     #[arg(long, default_value = "default")]
     pub world: String,
     /// `orbit` (4 m around the first target, 2 m above it), `lawnmower` (sweep at `--altitude`

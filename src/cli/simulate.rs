@@ -16,7 +16,7 @@ use crate::mission::simulation::{Mission, MissionInputs};
 /// Run the simulated mission on a world: search, localize, map and measure every target.
 #[derive(Debug, Args)]
 pub struct SimulateArgs {
-    /// `default` for the built-in world, or a world TOML file.
+    /// A built-in world (`default`, `library-a`, `library-b`) or a world TOML file.
     #[arg(long, default_value = "default")]
     pub world: String,
     /// Output directory.
