@@ -2,17 +2,9 @@
 //! resume), and sharding plus `merge` on hand-made run folders.
 
 mod common;
-use common::{path_str, read_json, scarp, scarp_ok};
+use common::{path_str, read_json, scarp, scarp_ok, test_data};
 
 use std::path::Path;
-
-fn data(name: &str) -> String {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/data")
-        .join(name)
-        .display()
-        .to_string()
-}
 
 /// Every figure of a campaign row equals the one in its run's own `mission.json`.
 fn assert_rows_match_missions(campaign_dir: &Path) {
@@ -74,8 +66,8 @@ fn assert_rows_match_missions(campaign_dir: &Path) {
 fn small_world_campaign_tabulates_its_missions_and_resumes() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("campaign");
-    let world = data("small_world.toml");
-    let config = data("small_mission.toml");
+    let world = test_data("small_world.toml");
+    let config = test_data("small_mission.toml");
     // An earlier, interrupted campaign: seed 2 finished (a hand-made run, so that the test
     // flies only two missions), seed 1 was interrupted half-way, seed 0 never started.
     fake_run(&out.join("runs/small_world/seed-2"), 2);

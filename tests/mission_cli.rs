@@ -2,18 +2,9 @@
 //! one distractor. The full default world is the README's main command; this keeps CI quick.
 
 mod common;
-use common::scarp;
+use common::{scarp, test_data};
 
-use std::path::Path;
 use std::process::Command;
-
-fn data(name: &str) -> String {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/data")
-        .join(name)
-        .display()
-        .to_string()
-}
 
 #[test]
 fn small_world_mission_finds_maps_and_measures_its_target() {
@@ -22,9 +13,9 @@ fn small_world_mission_finds_maps_and_measures_its_target() {
     let out = scarp(&[
         "simulate",
         "--world",
-        &data("small_world.toml"),
+        &test_data("small_world.toml"),
         "--config",
-        &data("small_mission.toml"),
+        &test_data("small_mission.toml"),
         "--seed",
         "3",
         "--out",
@@ -109,7 +100,7 @@ fn bad_mission_config_key_is_named() {
     let out = scarp(&[
         "simulate",
         "--world",
-        &data("small_world.toml"),
+        &test_data("small_world.toml"),
         "--config",
         config.to_str().unwrap(),
         "--out",
@@ -129,9 +120,9 @@ fn ctrl_c_leaves_a_consistent_interrupted_run() {
         .args([
             "simulate",
             "--world",
-            &data("small_world.toml"),
+            &test_data("small_world.toml"),
             "--config",
-            &data("small_mission.toml"),
+            &test_data("small_mission.toml"),
             "--out",
             out_dir.to_str().unwrap(),
         ])

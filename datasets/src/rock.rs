@@ -468,33 +468,7 @@ pub fn mirror_y(mesh: &mut TriangleMesh) {
 /// point: the same surface with 4^levels as many triangles. Midpoints are shared between the
 /// two faces of an edge, so a closed mesh stays closed. Colours and normals are dropped.
 pub fn subdivide_flat(mesh: &TriangleMesh, levels: u32) -> TriangleMesh {
-    let mut positions = mesh.positions.clone();
-    let mut faces = mesh.faces.clone();
-    for _ in 0..levels {
-        let mut midpoints: std::collections::HashMap<(u32, u32), u32> =
-            std::collections::HashMap::new();
-        let mut midpoint = |a: u32, b: u32, positions: &mut Vec<Point3<f32>>| {
-            *midpoints.entry((a.min(b), a.max(b))).or_insert_with(|| {
-                let m = nalgebra::center(&positions[a as usize], &positions[b as usize]);
-                positions.push(m);
-                (positions.len() - 1) as u32
-            })
-        };
-        faces = faces
-            .iter()
-            .flat_map(|&[a, b, c]| {
-                let ab = midpoint(a, b, &mut positions);
-                let bc = midpoint(b, c, &mut positions);
-                let ca = midpoint(c, a, &mut positions);
-                [[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]
-            })
-            .collect();
-    }
-    TriangleMesh {
-        positions,
-        faces,
-        ..TriangleMesh::default()
-    }
+    mesh.subdivided(levels, nalgebra::center)
 }
 
 /// Signed distance of `p` inside a counter-clockwise convex polygon (negative outside).

@@ -126,7 +126,7 @@ impl TriangleMesh {
     /// `level` times (20·4^level triangles), new vertices pushed onto the sphere.
     pub fn icosphere(level: u32) -> Self {
         let t = (1.0 + 5f32.sqrt()) / 2.0;
-        let mut positions: Vec<Point3<f32>> = [
+        let positions: Vec<Point3<f32>> = [
             (-1.0, t, 0.0),
             (1.0, t, 0.0),
             (-1.0, -t, 0.0),
@@ -143,7 +143,7 @@ impl TriangleMesh {
         .iter()
         .map(|&(x, y, z)| Point3::from(Vector3::new(x, y, z).normalize()))
         .collect();
-        let mut faces: Vec<[u32; 3]> = vec![
+        let faces: Vec<[u32; 3]> = vec![
             [0, 11, 5],
             [0, 5, 1],
             [0, 1, 7],
@@ -165,22 +165,50 @@ impl TriangleMesh {
             [8, 6, 7],
             [9, 8, 1],
         ];
-        for _ in 0..level {
+        let base = Self {
+            positions,
+            faces,
+            ..Self::default()
+        };
+        base.subdivided(level, |a, b| {
+            Point3::from((a.coords + b.coords).normalize())
+        })
+    }
+
+    /// Splits every triangle into four, `levels` times, placing each new vertex at
+    /// `midpoint(a, b)` of its edge's end points (shared between the edge's two triangles).
+    /// Only positions and faces are kept; normals and colours are dropped.
+    ///
+    /// ```
+    /// use scarp_slam::TriangleMesh;
+    /// let sphere = TriangleMesh::icosphere(0);
+    /// let flat = sphere.subdivided(2, nalgebra::center);
+    /// assert_eq!(flat.faces.len(), 20 * 16);
+    /// assert!((flat.volume_properties().unwrap().volume_m3
+    ///     - sphere.volume_properties().unwrap().volume_m3).abs() < 1e-6);
+    /// ```
+    pub fn subdivided(
+        &self,
+        levels: u32,
+        midpoint: impl Fn(&Point3<f32>, &Point3<f32>) -> Point3<f32>,
+    ) -> Self {
+        let mut positions = self.positions.clone();
+        let mut faces = self.faces.clone();
+        for _ in 0..levels {
             let mut midpoints: HashMap<(u32, u32), u32> = HashMap::new();
-            let mut midpoint = |a: u32, b: u32, positions: &mut Vec<Point3<f32>>| {
+            let mut split = |a: u32, b: u32, positions: &mut Vec<Point3<f32>>| {
                 *midpoints.entry((a.min(b), a.max(b))).or_insert_with(|| {
-                    let m =
-                        (positions[a as usize].coords + positions[b as usize].coords).normalize();
-                    positions.push(Point3::from(m));
+                    let m = midpoint(&positions[a as usize], &positions[b as usize]);
+                    positions.push(m);
                     (positions.len() - 1) as u32
                 })
             };
             faces = faces
                 .iter()
                 .flat_map(|&[a, b, c]| {
-                    let ab = midpoint(a, b, &mut positions);
-                    let bc = midpoint(b, c, &mut positions);
-                    let ca = midpoint(c, a, &mut positions);
+                    let ab = split(a, b, &mut positions);
+                    let bc = split(b, c, &mut positions);
+                    let ca = split(c, a, &mut positions);
                     [[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]
                 })
                 .collect();

@@ -6,6 +6,15 @@
 use std::path::Path;
 use std::process::{Command, Output};
 
+/// The path of a file in `tests/data/`, as a command-line argument.
+pub fn test_data(name: &str) -> String {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data")
+        .join(name)
+        .display()
+        .to_string()
+}
+
 /// Runs `scarp` with `args` and returns whatever happened.
 pub fn scarp(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_scarp"))
