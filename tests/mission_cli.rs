@@ -28,6 +28,16 @@ fn small_world_mission_finds_maps_and_measures_its_target() {
     assert_eq!(json["interrupted"], false, "{json:#}");
     assert_eq!(json["end_reason"], "complete", "{json:#}");
     assert_eq!(json["collisions"], 0);
+    assert_eq!(
+        json["safety_events"].as_array().map(Vec::len),
+        Some(0),
+        "{json:#}"
+    );
+    let by_mode = &json["min_clearance_by_mode_m"];
+    assert!(
+        by_mode["search"].as_f64().is_some() && by_mode["map"].as_f64().is_some(),
+        "{json:#}"
+    );
     assert_eq!(json["distractors_mapped"], 0);
     for key in ["sim_time_s", "wall_time_s", "real_time_factor"] {
         assert!(json[key].as_f64().unwrap() > 0.0, "{key}");
@@ -47,6 +57,17 @@ fn small_world_mission_finds_maps_and_measures_its_target() {
     assert!(t["gt_visible_fraction"].as_f64().unwrap() > 0.3, "{t:#}");
     assert!(t["ate_before_ba_m"].as_f64().unwrap() < 0.05, "{t:#}");
     assert!(t["ate_after_ba_m"].as_f64().is_some(), "{t:#}");
+    // The target's own clearance (fine localization and mapping) is never below the flight's.
+    let target_clearance = t["min_clearance_m"].as_f64().unwrap();
+    assert!(
+        target_clearance >= json["min_clearance_m"].as_f64().unwrap(),
+        "{t:#}"
+    );
+    // Its one target's clearance covers all of Map mode (and its fine localization too).
+    assert!(
+        by_mode["map"].as_f64().unwrap() >= target_clearance,
+        "{json:#}"
+    );
 
     let id = t["id"].as_u64().unwrap().to_string();
     let target_dir = out_dir.join("targets").join(&id);
@@ -90,6 +111,53 @@ fn small_world_mission_finds_maps_and_measures_its_target() {
     let geo: serde_json::Value =
         serde_json::from_slice(&std::fs::read(out_dir.join("targets.geojson")).unwrap()).unwrap();
     assert!(!geo["features"].as_array().unwrap().is_empty());
+}
+
+/// A vehicle whose collision radius reaches the ground from its search altitude collides on
+/// every step: one event, in search mode, against the terrain, with a WARN line.
+#[test]
+fn a_collision_is_an_event_with_time_place_and_obstacle() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("mission.toml");
+    std::fs::write(
+        &config,
+        "search_height_agl_m = 12.0\nsearch_inset_m = 5.0\nmax_sim_time_s = 6.0\ncollision_radius_m = 40.0\n",
+    )
+    .unwrap();
+    let out_dir = dir.path().join("mission");
+    let out = scarp(&[
+        "simulate",
+        "--world",
+        &test_data("small_world.toml"),
+        "--config",
+        config.to_str().unwrap(),
+        "--out",
+        out_dir.to_str().unwrap(),
+    ]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(stderr.contains("collision at t ="), "{stderr}");
+    let json: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out_dir.join("mission.json")).unwrap()).unwrap();
+    let events = json["safety_events"].as_array().unwrap();
+    assert_eq!(events.len(), 1, "{events:#?}");
+    let e = &events[0];
+    assert_eq!(e["kind"], "collision");
+    assert_eq!(e["mode"], "search");
+    assert_eq!(e["obstacle"], "terrain");
+    assert_eq!(e["steps"], json["collisions"]);
+    assert!(json["collisions"].as_u64().unwrap() > 1);
+    let min = e["min_clearance_m"].as_f64().unwrap();
+    assert_eq!(json["min_clearance_m"].as_f64(), Some(min));
+    assert_eq!(
+        json["min_clearance_by_mode_m"]["search"].as_f64(),
+        Some(min)
+    );
+    // The vehicle flies about 12 m above the ground: that is the clearance found.
+    assert!((8.0..16.0).contains(&min), "{min}");
+    let position = e["position_true_m"].as_array().unwrap();
+    assert_eq!(position.len(), 3);
+    assert!(e["start_time_s"].as_f64() <= e["end_time_s"].as_f64());
 }
 
 #[test]

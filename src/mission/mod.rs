@@ -11,6 +11,7 @@
 //! - [`mapping`]: Map mode for one target, then bundle adjustment, mesh, fragility, export.
 //! - [`coverage`]: the cylinder-coverage test that ends mapping.
 //! - [`evaluation`]: matching targets to the ground truth.
+//! - [`safety`]: the flight's true clearance, and collisions as events.
 //! - [`report`]: `mission.json`, `targets.geojson`, `targets.csv`.
 //! - [`html`]: `report.html` and its pictures.
 pub mod catalog;
@@ -24,4 +25,5 @@ pub mod motion;
 pub mod mount;
 pub mod perception;
 pub mod report;
+pub mod safety;
 pub mod simulation;

@@ -82,6 +82,9 @@ pub struct TargetReport {
     pub alpha_min_gt_deg: Option<f64>,
     /// |α_min − α_min,gt|, degrees.
     pub alpha_error_deg: Option<f64>,
+    /// Smallest true clearance while fine-localizing and mapping this target, metres.
+    #[serde(default)]
+    pub min_clearance_m: Option<f64>,
 }
 
 /// Wall time spent in each stage, seconds.
@@ -140,10 +143,17 @@ pub struct MissionReport {
     pub wall_time_s: f64,
     /// sim_time_s / wall_time_s.
     pub real_time_factor: f64,
-    /// Controller ticks closer than the collision radius to terrain or a rock.
+    /// Camera steps at which the true vehicle was closer than the collision radius to terrain,
+    /// a rock or a pedestal (`safety_events` groups them).
     pub collisions: usize,
     /// Smallest clearance of the true vehicle to terrain and rocks, metres.
     pub min_clearance_m: Option<f64>,
+    /// Smallest true clearance per mode (`search`, `fine_localize`, `map`), metres.
+    #[serde(default)]
+    pub min_clearance_by_mode_m: std::collections::BTreeMap<String, f64>,
+    /// Collisions as events: when, in which mode, where, against what, how deep.
+    #[serde(default)]
+    pub safety_events: Vec<super::safety::SafetyEvent>,
     /// Frames taken in Search, FineLocalize and Map modes.
     pub frames_search: usize,
     /// Frames taken while flying fine-localization circles.

@@ -27,6 +27,7 @@ use super::motion::MotionSystem;
 use super::mount::CameraMount;
 use super::perception::{Perception, center_in_box};
 use super::report::{MissionReport, ModeChange, StageTimings};
+use super::safety::SafetyLog;
 
 /// Frames tried (at the map camera rate: 1 s) to see the target before its map starts anyway
 /// (`Mission::recenter_map_on_first_frame`).
@@ -125,7 +126,8 @@ pub struct Mission<'a> {
     log: Vec<FlightLogEntry>,
     report: MissionReport,
     frame_index: u64,
-    min_clearance_m: Option<f64>,
+    /// The flight's true clearance and its collisions.
+    safety: SafetyLog,
     /// The last FineLocalize depth image and its estimated pose: where the ground under a
     /// target is, in the frame the vehicle flies in.
     last_depth: Option<(scarp_slam::image::DepthImage, Isometry3<f64>)>,
@@ -205,7 +207,7 @@ impl<'a> Mission<'a> {
                 ..MissionReport::default()
             },
             frame_index: 0,
-            min_clearance_m: None,
+            safety: SafetyLog::new(config.collision_radius_m, obstacle_names(world)),
             last_depth: None,
             recenter_attempts: 0,
             inputs,
@@ -301,17 +303,20 @@ impl<'a> Mission<'a> {
         self.motion.advance_to(t, &drift)?;
         let t = self.motion.time_s();
         let world_from_body = self.motion.world_from_body();
-        if let Some(c) = self
-            .env
-            .clearance_at(&world_from_body.translation.vector.into())
+        let position = world_from_body.translation.vector;
+        if let Some(c) = self.env.clearance_at(&position.into())
+            && let Some(event) = self.safety.observe(t, self.mode, position.into(), c)
         {
-            self.min_clearance_m = Some(
-                self.min_clearance_m
-                    .map_or(c.clearance_m, |m| m.min(c.clearance_m)),
+            tracing::warn!(
+                "collision at t = {t:.1} s in {} (target {:?}): {} at true clearance {:.2} m, vehicle at ({:.2}, {:.2}, {:.2})",
+                event.mode,
+                event.target,
+                event.obstacle,
+                event.min_clearance_m,
+                position.x,
+                position.y,
+                position.z
             );
-            if c.clearance_m < self.inputs.config.collision_radius_m {
-                self.report.collisions += 1;
-            }
         }
         timings.flight_s += clock.elapsed().as_secs_f64();
 
@@ -850,7 +855,17 @@ impl<'a> Mission<'a> {
         self.report.sim_time_s = sim;
         self.report.wall_time_s = wall_s;
         self.report.real_time_factor = if wall_s > 0.0 { sim / wall_s } else { 0.0 };
-        self.report.min_clearance_m = self.min_clearance_m;
+        self.safety.close();
+        self.report.min_clearance_m = self.safety.min_clearance_m;
+        self.report.collisions = self.safety.collision_steps;
+        self.report.min_clearance_by_mode_m = self.safety.min_clearance_by_mode_m.clone();
+        self.report.safety_events = self.safety.events.clone();
+        for target in self.targets.values_mut() {
+            target.report.min_clearance_m = u32::try_from(target.report.id)
+                .ok()
+                .and_then(|id| self.safety.min_clearance_by_target_m.get(&id))
+                .copied();
+        }
         self.report.timings = timings;
         self.report.targets = self.targets.values().map(|m| m.report.clone()).collect();
         self.report.targets_found = self.targets.len();
@@ -896,4 +911,17 @@ impl<'a> Mission<'a> {
         )?;
         Ok(())
     }
+}
+
+/// Names of the planning environment's obstacles, in its order (each rock, then its pedestal:
+/// see [`crate::cli::plan::planning_environment`]).
+fn obstacle_names(world: &World) -> Vec<String> {
+    world
+        .rocks
+        .iter()
+        .flat_map(|r| {
+            std::iter::once(format!("rock {}", r.id))
+                .chain(r.pedestal.as_ref().map(|_| format!("pedestal {}", r.id)))
+        })
+        .collect()
 }
