@@ -71,7 +71,7 @@ pub fn render(report: &CampaignReport) -> String {
             rate(&t.runs_clearance_at_least_0_5m),
         ),
         (
-            "collision ticks, all runs".into(),
+            "camera steps in collision, all runs".into(),
             t.collisions_total.to_string(),
         ),
         (
@@ -275,7 +275,7 @@ fn worst_cases(md: &mut String, report: &CampaignReport) {
     for r in by_clearance.iter().take(WORST_ROWS) {
         let _ = writeln!(
             md,
-            "- {} m, {} collision ticks — `{}`",
+            "- {} m, {} camera steps in collision — `{}`",
             num(r.min_clearance_m, 2),
             r.collisions.unwrap_or(0),
             r.run_dir

@@ -63,7 +63,7 @@ pub struct RunRow {
     pub wall_time_s: Option<f64>,
     /// Simulated time, seconds.
     pub sim_time_s: Option<f64>,
-    /// Controller ticks in collision.
+    /// Camera steps in collision.
     pub collisions: Option<u64>,
     /// Smallest true clearance of the flight, metres.
     pub min_clearance_m: Option<f64>,
@@ -174,7 +174,7 @@ pub struct Totals {
     pub runs_unfinished: usize,
     /// Finished runs with no collision.
     pub runs_without_collision: Rate,
-    /// Collision ticks summed over the runs.
+    /// Camera steps in collision, summed over the runs.
     pub collisions_total: u64,
     /// Finished runs whose true clearance stayed ≥ 0.5 m.
     pub runs_clearance_at_least_0_5m: Rate,
