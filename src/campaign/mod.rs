@@ -131,10 +131,16 @@ impl CampaignHeader {
     /// # Errors
     /// A missing or malformed file, naming it.
     pub fn read(dir: &Path) -> Result<Self, CampaignError> {
-        let path = dir.join(CAMPAIGN_JSON);
-        let bytes = std::fs::read(&path).map_err(|e| CampaignError::io(&path, e))?;
-        serde_json::from_slice(&bytes).map_err(|e| CampaignError::json(&path, e))
+        read_json_file(&dir.join(CAMPAIGN_JSON))
     }
+}
+
+/// Reads and parses a JSON file, naming it in any error.
+pub(crate) fn read_json_file<T: serde::de::DeserializeOwned>(
+    path: &Path,
+) -> Result<T, CampaignError> {
+    let bytes = std::fs::read(path).map_err(|e| CampaignError::io(path, e))?;
+    serde_json::from_slice(&bytes).map_err(|e| CampaignError::json(path, e))
 }
 
 /// The file names a campaign folder holds besides `runs/`.
@@ -183,9 +189,7 @@ impl CampaignReport {
     /// # Errors
     /// A missing or malformed file, naming it.
     pub fn read(dir: &Path) -> Result<Self, CampaignError> {
-        let path = dir.join(CAMPAIGN_JSON);
-        let bytes = std::fs::read(&path).map_err(|e| CampaignError::io(&path, e))?;
-        serde_json::from_slice(&bytes).map_err(|e| CampaignError::json(&path, e))
+        read_json_file(&dir.join(CAMPAIGN_JSON))
     }
 
     /// Writes `campaign.json` and `campaign.md` into `dir`, each atomically.

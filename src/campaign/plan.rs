@@ -189,10 +189,12 @@ pub fn run_is_finished(run_dir: &Path) -> bool {
     let Ok(bytes) = std::fs::read(run_dir.join("mission.json")) else {
         return false;
     };
-    let Ok(json) = serde_json::from_slice::<serde_json::Value>(&bytes) else {
-        return false;
-    };
-    json.get("interrupted").and_then(|v| v.as_bool()) == Some(false)
+    serde_json::from_slice::<serde_json::Value>(&bytes).is_ok_and(|json| mission_is_finished(&json))
+}
+
+/// Whether a parsed `mission.json` is a finished run's: it says it was not interrupted.
+pub fn mission_is_finished(mission: &serde_json::Value) -> bool {
+    mission.get("interrupted").and_then(|v| v.as_bool()) == Some(false)
 }
 
 #[cfg(test)]

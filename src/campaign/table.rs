@@ -12,8 +12,8 @@ use scarp_slam::stats::{median, quantile};
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
-use super::CampaignError;
-use super::plan::{RunSpec, run_is_finished};
+use super::plan::{RunSpec, mission_is_finished};
+use super::{CampaignError, read_json_file};
 
 /// F-score at 2 cm a mapped target must reach.
 pub const FSCORE_2CM_MIN: f64 = 0.85;
@@ -211,11 +211,6 @@ pub struct Totals {
     pub figures: Vec<MetricStats>,
 }
 
-fn read_json(path: &Path) -> Result<Value, CampaignError> {
-    let bytes = std::fs::read(path).map_err(|e| CampaignError::io(path, e))?;
-    serde_json::from_slice(&bytes).map_err(|e| CampaignError::json(path, e))
-}
-
 fn f(v: &Value, key: &str) -> Option<f64> {
     v.get(key).and_then(Value::as_f64).filter(|x| x.is_finite())
 }
@@ -273,7 +268,7 @@ pub fn read_run(
     let dir = campaign_dir.join(&rel);
     let mission_path = dir.join("mission.json");
     let mission = if mission_path.is_file() {
-        Some(read_json(&mission_path)?)
+        Some(read_json_file::<Value>(&mission_path)?)
     } else {
         None
     };
@@ -281,7 +276,7 @@ pub fn read_run(
         _ if !dir.exists() => RunState::NotRun,
         None if dir.join(FAILED_MARKER).is_file() => RunState::Failed,
         None => RunState::Started,
-        Some(_) if run_is_finished(&dir) => RunState::Finished,
+        Some(m) if mission_is_finished(m) => RunState::Finished,
         Some(_) => RunState::Interrupted,
     };
     let empty = Value::Null;
@@ -310,7 +305,7 @@ pub fn read_run(
     if !world_path.is_file() {
         return Ok((run_row, Vec::new()));
     }
-    let world = read_json(&world_path)?;
+    let world = read_json_file::<Value>(&world_path)?;
     let mission_targets: Vec<&Value> = m
         .get("targets")
         .and_then(Value::as_array)
