@@ -106,13 +106,23 @@ pub fn planning_environment(world: &World) -> anyhow::Result<Environment> {
             .collect(),
         faces: m.faces.clone(),
     };
-    let obstacles: Vec<Obstacle> = world
-        .rocks
-        .iter()
-        .flat_map(|r| std::iter::once(&r.mesh).chain(r.pedestal.as_ref()))
-        .map(mesh_obstacle)
+    let obstacles: Vec<Obstacle> = world_obstacles(world)
+        .map(|(_, mesh)| mesh_obstacle(mesh))
         .collect();
     Ok(Environment::new(Some(terrain), &obstacles)?)
+}
+
+/// The world's obstacles in the planning environment's order (each rock, then its pedestal),
+/// each with its name in reports (`rock <id>`, `pedestal <id>`): obstacle index i of
+/// [`planning_environment`] is item i here.
+pub fn world_obstacles(world: &World) -> impl Iterator<Item = (String, &scarp_slam::TriangleMesh)> {
+    world.rocks.iter().flat_map(|r| {
+        std::iter::once((format!("rock {}", r.id), &r.mesh)).chain(
+            r.pedestal
+                .as_ref()
+                .map(|p| (format!("pedestal {}", r.id), p)),
+        )
+    })
 }
 
 /// What `flight.json` holds: the flight metrics plus the plan's size.

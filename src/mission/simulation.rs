@@ -207,7 +207,12 @@ impl<'a> Mission<'a> {
                 ..MissionReport::default()
             },
             frame_index: 0,
-            safety: SafetyLog::new(config.collision_radius_m, obstacle_names(world)),
+            safety: SafetyLog::new(
+                config.collision_radius_m,
+                crate::cli::plan::world_obstacles(world)
+                    .map(|(name, _)| name)
+                    .collect(),
+            ),
             last_depth: None,
             recenter_attempts: 0,
             inputs,
@@ -911,17 +916,4 @@ impl<'a> Mission<'a> {
         )?;
         Ok(())
     }
-}
-
-/// Names of the planning environment's obstacles, in its order (each rock, then its pedestal:
-/// see [`crate::cli::plan::planning_environment`]).
-fn obstacle_names(world: &World) -> Vec<String> {
-    world
-        .rocks
-        .iter()
-        .flat_map(|r| {
-            std::iter::once(format!("rock {}", r.id))
-                .chain(r.pedestal.as_ref().map(|_| format!("pedestal {}", r.id)))
-        })
-        .collect()
 }
