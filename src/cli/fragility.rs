@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, bail};
 use scarp_slam::TriangleMesh;
 
-use crate::fragility::scan::close_scan;
+use crate::fragility::scan::{analyze_closed_scan, close_scan};
 use crate::fragility::{
     ContactSpec, FragilityConfig, FragilityReport, analyze_detailed, figure::write_figure,
 };
@@ -103,7 +103,8 @@ fn load_config(args: &FragilityArgs) -> anyhow::Result<FragilityConfig> {
 pub fn summary(report: &FragilityReport) -> String {
     let pair = &report.alpha_min_pair;
     format!(
-        "alpha_min           {:.2}° ± {:.2}° (1σ of {} perturbed runs), tipping towards azimuth {:.1}°\n\
+        "alpha_min           {:.2}°, 95% interval [{:.2}°, {:.2}°] ({}), tipping towards azimuth {:.1}°\n\
+         perturbation        ± {:.2}° (1σ of {} perturbed runs)\n\
          opposite direction  {:.2}°\n\
          toppling PGA        {:.3} g ({:.2} m/s²)\n\
          contact             {:?} at {:.4} m, area {:.4} m² (section {:.4} m²)\n\
@@ -112,9 +113,12 @@ pub fn summary(report: &FragilityReport) -> String {
          height/width        {:.2} ({:.3} m / {:.3} m)\n\
          Purvance p          {:.3} rad/s (R = {:.3} m)\n",
         report.alpha_min_deg,
+        report.alpha_min_low_deg,
+        report.alpha_min_high_deg,
+        report.alpha_interval.source,
+        report.alpha_min_azimuth_deg,
         report.alpha_min_spread_deg,
         report.uncertainty.samples - report.uncertainty.failed_samples,
-        report.alpha_min_azimuth_deg,
         pair.opposite_alpha_deg,
         report.toppling_pga_g,
         report.toppling_pga_m_s2,
@@ -147,7 +151,7 @@ pub fn summary(report: &FragilityReport) -> String {
 pub fn run(args: FragilityArgs) -> anyhow::Result<()> {
     let config = load_config(&args)?;
     let mut mesh = read_mesh(&args.mesh)?;
-    let mut scan_contact = None;
+    let mut closed_scan = None;
     if args.scan {
         let closed = close_scan(&mesh, &config.scan)
             .with_context(|| format!("closing the scan {}", args.mesh.display()))?;
@@ -157,19 +161,23 @@ pub fn run(args: FragilityArgs) -> anyhow::Result<()> {
             loops = closed.loops_closed,
             "scan cut above its support and closed"
         );
-        mesh = closed.mesh;
-        scan_contact = Some(closed.contact_polygon);
+        mesh = closed.mesh.clone();
+        closed_scan = Some(closed);
     }
     let pedestal = args.pedestal.as_deref().map(read_mesh).transpose()?;
-    let contact = match (&pedestal, args.contact_height, &scan_contact) {
-        (Some(p), _, _) => ContactSpec::Pedestal(p),
-        (None, Some(h), _) => ContactSpec::Height(h),
-        (None, None, Some(polygon)) => ContactSpec::Polygon(polygon),
-        (None, None, None) => ContactSpec::Auto,
+    let contact = match (&pedestal, args.contact_height) {
+        (Some(p), _) => Some(ContactSpec::Pedestal(p)),
+        (None, Some(h)) => Some(ContactSpec::Height(h)),
+        (None, None) => closed_scan.is_none().then_some(ContactSpec::Auto),
     };
     tracing::info!(mesh = %args.mesh.display(), faces = mesh.faces.len(), "fragility analysis");
-    let analysis = analyze_detailed(&mesh, contact, &config)
-        .with_context(|| format!("analysing {}", args.mesh.display()))?;
+    // A scan without a given contact gets the extrapolated contact and its interval.
+    let analysis = match (contact, &closed_scan) {
+        (Some(contact), _) => analyze_detailed(&mesh, contact, &config),
+        (None, Some(closed)) => analyze_closed_scan(closed, &config),
+        (None, None) => analyze_detailed(&mesh, ContactSpec::Auto, &config),
+    }
+    .with_context(|| format!("analysing {}", args.mesh.display()))?;
     if let Some(path) = &args.figure {
         write_figure(&analysis, path)?;
         tracing::info!(figure = %path.display(), "figure written");

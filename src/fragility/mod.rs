@@ -334,12 +334,40 @@ pub struct FragilityReport {
     pub purvance_p_rad_s: f64,
     /// Standard deviation of α_min under perturbation, degrees (0 when the study is off).
     pub alpha_min_spread_deg: f64,
+    /// Lower end of the 95% interval of α_min, degrees. See [`AlphaInterval`] for what it
+    /// spans.
+    pub alpha_min_low_deg: f64,
+    /// Upper end of the 95% interval of α_min, degrees.
+    pub alpha_min_high_deg: f64,
+    /// How the interval was formed.
+    pub alpha_interval: AlphaInterval,
     /// Details of the perturbation study.
     pub uncertainty: UncertaintyReport,
     /// Up direction used, unit vector, input frame.
     pub up: [f64; 3],
     /// Repairs made to the rock mesh.
     pub repairs: MeshRepairs,
+}
+
+/// What the α_min interval of a [`FragilityReport`] spans.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct AlphaInterval {
+    /// Where the interval comes from: `perturbation` (the mesh-noise and contact-height study
+    /// alone, for a closed rock with a known contact) or `scan_contact` (also the readings of a
+    /// scan's extrapolated contact, [`scan::analyze_scan`]).
+    pub source: String,
+    /// Contact readings evaluated (0 for `perturbation`).
+    pub contact_hypotheses: usize,
+    /// Contact readings that gave no polygon.
+    pub contact_hypotheses_failed: usize,
+    /// Smallest α_min over the contact readings, degrees.
+    pub contact_alpha_low_deg: Option<f64>,
+    /// Largest α_min over the contact readings, degrees.
+    pub contact_alpha_high_deg: Option<f64>,
+    /// Fraction of each end added to it (the low end times 1 − f, the high end times 1 + f).
+    pub relative_margin: f64,
+    /// Margin then added to each end, degrees.
+    pub margin_deg: f64,
 }
 
 /// A report together with the levelled geometry behind it, for figures.
@@ -366,6 +394,46 @@ impl FragilityAnalysis {
     /// The closed rock above the contact (section triangulated), in the input frame, metres.
     pub fn closed_rock(&self) -> TriangleMesh {
         self.rock.to_mesh(&self.input_from_levelled)
+    }
+
+    /// α_min, degrees, of this rock (its centre of mass) standing on another contact polygon:
+    /// points in the input frame, metres, whose mean height along up is the contact plane.
+    /// Negative when the centre of mass lies outside it; `None` for a polygon with no area or a
+    /// non-finite point.
+    pub fn alpha_min_on_contact(&self, polygon: &[[f64; 3]]) -> Option<f64> {
+        let (h, hull) = levelled_polygon(polygon, &self.input_from_levelled.inverse()).ok()?;
+        let support = rocking::minimum_support(&hull, &self.com.xy())?;
+        Some(support.distance_m.atan2(self.com.z - h).to_degrees())
+    }
+
+    /// Widens the α_min interval to span `contact_alphas` (α_min on other readings of the
+    /// contact, degrees; `failed` readings gave none) with the perturbation study's spread on
+    /// each side, then by the fraction `relative_margin` of each end and `margin_deg` beyond.
+    pub fn widen_interval(
+        &mut self,
+        contact_alphas: &[f64],
+        failed: usize,
+        relative_margin: f64,
+        margin_deg: f64,
+    ) {
+        let r = &mut self.report;
+        let below = r.alpha_min_deg - r.alpha_min_low_deg;
+        let above = r.alpha_min_high_deg - r.alpha_min_deg;
+        let low = contact_alphas.iter().copied().reduce(f64::min);
+        let high = contact_alphas.iter().copied().reduce(f64::max);
+        let spanned_low = low.unwrap_or(r.alpha_min_deg).min(r.alpha_min_deg) - below;
+        let spanned_high = high.unwrap_or(r.alpha_min_deg).max(r.alpha_min_deg) + above;
+        r.alpha_min_low_deg = (spanned_low * (1.0 - relative_margin) - margin_deg).max(0.0);
+        r.alpha_min_high_deg = spanned_high * (1.0 + relative_margin) + margin_deg;
+        r.alpha_interval = AlphaInterval {
+            source: "scan_contact".into(),
+            contact_hypotheses: contact_alphas.len() + failed,
+            contact_hypotheses_failed: failed,
+            contact_alpha_low_deg: low,
+            contact_alpha_high_deg: high,
+            relative_margin,
+            margin_deg,
+        };
     }
 }
 
@@ -425,18 +493,25 @@ pub(crate) fn evaluate(
             upper
         }
     };
-    let (hull, contact_height) = match support {
-        Support::Exact(hull) => (hull.to_vec(), plane),
-        Support::Fixed(hull) => (clipped_base(hull), h),
-        Support::Below(full) if full.z_range().is_some_and(|(lo, _)| lo < h) => (
-            clipped_base(&rocking::convex_hull(&contact::points_below(
-                full, h, band_m, false,
-            ))),
-            h,
-        ),
-        Support::Below(_) => (clipped_base(&[]), h),
+    // The contact, and the support's top that bounds where the rock can land (`None` for a
+    // given contact polygon, which already is the whole support, and for a rock given without
+    // its support, whose extent is unknown: landing on it could only raise α).
+    let (hull, contact_height, landing_support) = match support {
+        Support::Exact(hull) => (hull.to_vec(), plane, None),
+        Support::Fixed(hull) => (clipped_base(hull), h, Some(hull.to_vec())),
+        Support::Below(full) if full.z_range().is_some_and(|(lo, _)| lo < h) => {
+            let below = rocking::convex_hull(&contact::points_below(full, h, band_m, false));
+            (clipped_base(&below), h, Some(below))
+        }
+        Support::Below(_) => (clipped_base(&[]), h, None),
     };
     let com = mass.center_of_mass;
+    let hull = match landing_support {
+        Some(support) => {
+            rocking::landing_hull(&hull, &cut.solid.positions, &support, contact_height, &com)
+        }
+        None => hull,
+    };
     let min = rocking::minimum_support(&hull, &com.xy()).ok_or_else(|| {
         FragilityError::Degenerate(format!(
             "the rock and its support do not overlap at the contact height {h} m"
@@ -607,6 +682,18 @@ pub fn analyze_detailed(
     // Uncertainty.
     let uncertainty = alpha_min_spread(&solid, h, given_support, config);
 
+    // The perturbed range, about the unperturbed value (which it may not contain).
+    let alpha = eval.alpha_min_rad.to_degrees();
+    let succeeded = uncertainty.samples > uncertainty.failed_samples;
+    let (perturbed_low, perturbed_high) = if succeeded {
+        (
+            uncertainty.alpha_min_lowest_deg.min(alpha),
+            uncertainty.alpha_min_highest_deg.max(alpha),
+        )
+    } else {
+        (alpha, alpha)
+    };
+
     let to_input = |p: Point3<f64>| -> [f64; 3] { (input_from_levelled * p).coords.into() };
     let r = input_from_levelled.matrix();
     let inertia: Matrix3<f64> = r * eval.mass.inertia_kg_m2 * r.transpose();
@@ -645,6 +732,17 @@ pub fn analyze_detailed(
         inertia_about_rocking_axis_kg_m2: inertia_o,
         purvance_p_rad_s: p,
         alpha_min_spread_deg: uncertainty.alpha_min_std_deg,
+        alpha_min_low_deg: perturbed_low,
+        alpha_min_high_deg: perturbed_high,
+        alpha_interval: AlphaInterval {
+            source: "perturbation".into(),
+            contact_hypotheses: 0,
+            contact_hypotheses_failed: 0,
+            contact_alpha_low_deg: None,
+            contact_alpha_high_deg: None,
+            relative_margin: 0.0,
+            margin_deg: 0.0,
+        },
         uncertainty,
         up: Vector3::from(config.up).normalize().into(),
         repairs,

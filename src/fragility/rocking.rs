@@ -8,7 +8,7 @@
 //! the centre of mass above the contact plane. A horizontal ground acceleration of g·tan α(θ)
 //! pushing the rock towards θ brings the resultant force onto that edge.
 
-use nalgebra::{Point2, Vector2};
+use nalgebra::{Point2, Point3, Vector2};
 use scarp_slam::geometry::{convex_hull_2d, polygon_signed_area};
 use serde::{Deserialize, Serialize};
 
@@ -177,6 +177,68 @@ pub fn minimum_support(hull: &[Point2<f64>], com: &Point2<f64>) -> Option<Minimu
     })
 }
 
+/// The contact a rock pivots about by the time it topples: `hull` (the base that touches,
+/// convex, counter-clockwise, levelled xy) grown by every point of `underside` (levelled, the
+/// rock's vertices) over `support` (the support's top, convex counter-clockwise xy; empty for
+/// an unbounded plane at `plane_z`) that lands before the rock topples.
+///
+/// Tipping about a hull edge by β lowers a point at height z above the plane and a distance d
+/// beyond the edge until it touches when tan β = z / d. If that comes before the centre of mass
+/// `com` passes over the edge (tan β < its distance to the edge / its height), the rock lands
+/// on the point and pivots about it instead. A base that hangs millimetres above its support
+/// beyond the touching part is therefore part of the support: a rock does not topple about the
+/// edge of a contact it would land beyond after a fraction of a degree. The edges are revisited
+/// until no point lands (each pass only moves pivots outwards).
+pub fn landing_hull(
+    hull: &[Point2<f64>],
+    underside: &[Point3<f64>],
+    support: &[Point2<f64>],
+    plane_z: f64,
+    com: &Point3<f64>,
+) -> Vec<Point2<f64>> {
+    let com_height = com.z - plane_z;
+    if hull.len() < 3 || com_height <= 0.0 {
+        return hull.to_vec();
+    }
+    let inside = |polygon: &[Point2<f64>], p: &Point2<f64>| {
+        let n = polygon.len();
+        (0..n).all(|k| orient(&polygon[k], &polygon[(k + 1) % n], p) >= 0.0)
+    };
+    let mut candidates: Vec<Point3<f64>> = underside
+        .iter()
+        .filter(|p| p.z >= plane_z && (support.len() < 3 || inside(support, &p.xy())))
+        .copied()
+        .collect();
+    let mut hull = hull.to_vec();
+    // Each pass adds at least one point or stops; a bound keeps a pathological mesh finite.
+    for _ in 0..64 {
+        candidates.retain(|p| !inside(&hull, &p.xy()));
+        let n = hull.len();
+        let landed: Vec<Point2<f64>> = candidates
+            .iter()
+            .filter(|p| {
+                (0..n).any(|k| {
+                    let (a, b) = (hull[k], hull[(k + 1) % n]);
+                    let e = (b - a).normalize();
+                    let outward = Vector2::new(e.y, -e.x);
+                    let beyond = (p.xy() - a).dot(&outward);
+                    let com_inside = (a - com.xy()).dot(&outward);
+                    beyond > 0.0
+                        && com_inside > 0.0
+                        && (p.z - plane_z) * com_height < beyond * com_inside
+                })
+            })
+            .map(|p| p.xy())
+            .collect();
+        if landed.is_empty() {
+            break;
+        }
+        hull.extend(landed);
+        hull = convex_hull(&hull);
+    }
+    hull
+}
+
 /// Purvance's rocking frequency parameter p = √(m g R / I_O), rad/s, where R is the distance
 /// from the centre of mass to the rocking axis and I_O the moment of inertia about that axis.
 /// For a uniform rectangular block I_O = 4/3 m R², so p = √(3g / 4R). Returns NaN when
@@ -192,6 +254,31 @@ pub fn purvance_p(mass_kg: f64, g_m_s2: f64, radius_m: f64, inertia_about_axis_k
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_base_hanging_just_above_the_support_is_landed_on() {
+        let com = Point3::new(0.0, 0.0, 0.5);
+        // 2 mm up and 0.2 m beyond the east edge: tipping east lands on it after 0.6°, long
+        // before the 11.3° that topples the rock about the edge.
+        let low = Point3::new(0.3, 0.0, 0.002);
+        // 0.2 m up: the rock topples before it comes down.
+        let high = Point3::new(-0.3, 0.0, 0.2);
+        // A square contact 0.2 m wide under a centre of mass 0.5 m up.
+        let hull = landing_hull(&square(0.1), &[low, high], &[], 0.0, &com);
+        let east = minimum_support(&hull, &com.xy()).unwrap();
+        assert!((polygon_area(&hull) - (0.2 * 0.2 + 0.5 * 0.2 * 0.2)).abs() < 1e-12);
+        assert!(
+            (east.distance_m - 0.1).abs() < 1e-12,
+            "west and north still bind"
+        );
+        assert!(hull.iter().any(|p| (p.x - 0.3).abs() < 1e-12));
+        assert!(hull.iter().all(|p| p.x > -0.11));
+        // A support that ends at 0.2 m east leaves nothing there to land on.
+        assert_eq!(
+            landing_hull(&square(0.1), &[low, high], &square(0.2), 0.0, &com),
+            square(0.1)
+        );
+    }
     use proptest::prelude::*;
 
     fn square(b: f64) -> Vec<Point2<f64>> {

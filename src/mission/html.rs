@@ -287,14 +287,14 @@ cylinders black.</p><img src=\"map.png\" width=\"700\">\n",
         "<h2>Targets</h2><table><tr><th>id</th><th>status</th><th>true rock</th>\
 <th>localization error (m)</th><th>coverage</th><th>base coverage</th><th>F1cm</th><th>F2cm</th>\
 <th>accuracy (mm)</th><th>completeness (mm)</th><th>visible GT</th><th>ATE before BA (mm)</th>\
-<th>ATE after BA (mm)</th><th>α_min (°)</th><th>α_min true (°)</th><th>toppling PGA (g)</th></tr>\n",
+<th>ATE after BA (mm)</th><th>α_min (°)</th><th>95% interval (°)</th><th>α_min true (°)</th><th>toppling PGA (g)</th></tr>\n",
     );
     for t in &report.targets {
         let mm = |v: Option<f64>| opt(v.map(|v| v * 1000.0), 1);
         let _ = writeln!(
             html,
             "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{:.2}</td><td>{:.2}</td><td>{}</td>\
-<td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+<td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
             t.id,
             t.status,
             t.gt_rock_id.map_or("–".into(), |id| format!(
@@ -312,6 +312,10 @@ cylinders black.</p><img src=\"map.png\" width=\"700\">\n",
             mm(t.ate_before_ba_m),
             mm(t.ate_after_ba_m),
             opt(t.alpha_min_deg, 2),
+            match (t.alpha_min_low_deg, t.alpha_min_high_deg) {
+                (Some(low), Some(high)) => format!("{low:.1}–{high:.1}"),
+                _ => "–".into(),
+            },
             opt(t.alpha_min_gt_deg, 2),
             opt(t.toppling_pga_g, 3),
         );

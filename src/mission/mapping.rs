@@ -412,6 +412,8 @@ pub fn finish_target(
         Ok(analysis) => {
             let r = &analysis.report;
             report.alpha_min_deg = Some(r.alpha_min_deg);
+            report.alpha_min_low_deg = Some(r.alpha_min_low_deg);
+            report.alpha_min_high_deg = Some(r.alpha_min_high_deg);
             report.toppling_pga_g = Some(r.toppling_pga_g);
             report.size_m = Some(r.rock_height_m);
             let json = serde_json::to_string_pretty(r)?;
@@ -433,6 +435,8 @@ pub fn finish_target(
     let mut extras = serde_json::json!({"target_id": report.id, "status": if mapped {"mapped"} else {"incomplete"}});
     if let Some(a) = report.alpha_min_deg {
         extras["alpha_min_deg"] = a.into();
+        extras["alpha_min_low_deg"] = report.alpha_min_low_deg.into();
+        extras["alpha_min_high_deg"] = report.alpha_min_high_deg.into();
         extras["toppling_pga_g"] = report.toppling_pga_g.into();
     }
     write_glb(

@@ -52,6 +52,10 @@ pub struct TargetReport {
     pub size_m: Option<f64>,
     /// Smallest rocking angle from the mesh, degrees.
     pub alpha_min_deg: Option<f64>,
+    /// Lower end of α_min's 95% interval, degrees (`fragility.json`'s `alpha_min_low_deg`).
+    pub alpha_min_low_deg: Option<f64>,
+    /// Upper end of α_min's 95% interval, degrees.
+    pub alpha_min_high_deg: Option<f64>,
     /// Quasi-static toppling acceleration g·tan(α_min), in g.
     pub toppling_pga_g: Option<f64>,
     /// Why it is not `mapped`, when it is not.
@@ -194,6 +198,8 @@ impl MissionReport {
                     "status": t.status,
                     "size_m": t.size_m,
                     "alpha_min_deg": t.alpha_min_deg,
+                    "alpha_min_low_deg": t.alpha_min_low_deg,
+                    "alpha_min_high_deg": t.alpha_min_high_deg,
                     "toppling_pga_g": t.toppling_pga_g,
                 }),
             })
@@ -203,14 +209,14 @@ impl MissionReport {
         write_atomically(dir.join("targets.csv"), |w| {
             writeln!(
                 w,
-                "id,status,x_m,y_m,z_m,lat_deg,lon_deg,alt_m,size_m,alpha_min_deg,toppling_pga_g"
+                "id,status,x_m,y_m,z_m,lat_deg,lon_deg,alt_m,size_m,alpha_min_deg,alpha_min_low_deg,alpha_min_high_deg,toppling_pga_g"
             )?;
             let opt = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.4}"));
             for t in &self.targets {
                 let g = frame.enu_to_geodetic(&Point3::from(t.center));
                 writeln!(
                     w,
-                    "{},{},{:.3},{:.3},{:.3},{:.8},{:.8},{:.3},{},{},{}",
+                    "{},{},{:.3},{:.3},{:.3},{:.8},{:.8},{:.3},{},{},{},{},{}",
                     t.id,
                     t.status,
                     t.center[0],
@@ -221,6 +227,8 @@ impl MissionReport {
                     g.alt_m,
                     opt(t.size_m),
                     opt(t.alpha_min_deg),
+                    opt(t.alpha_min_low_deg),
+                    opt(t.alpha_min_high_deg),
                     opt(t.toppling_pga_g)
                 )?;
             }

@@ -1,0 +1,216 @@
+//! Where a scanned rock's α_min goes wrong: for every mapped target of a finished campaign,
+//! re-runs the scan analysis on the saved mesh (moved into the world frame by the keyframes'
+//! map-to-world alignment) and compares each part of it with the world's truth: the contact
+//! height, the contact polygon's area and centre, the centre of mass, and α_min with the true
+//! contact or the true centre of mass swapped in.
+//!
+//! ```text
+//! cargo run --release --example contact_diagnosis -- CAMPAIGN_DIR
+//! ```
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result};
+use nalgebra::{Isometry3, Point2, Vector3};
+use scarp::evaluation::trajectory::umeyama;
+use scarp::fragility::rocking::minimum_support;
+use scarp::fragility::scan::analyze_scan;
+use scarp::fragility::{ContactSpec, FragilityConfig, FragilityReport, analyze};
+use scarp_datasets::world::World;
+use scarp_export::ply::read_mesh;
+use scarp_export::tum::read_tum_trajectory;
+
+/// α_min, degrees, of a centre of mass over a contact polygon (both world frame).
+fn alpha_deg(polygon: &[[f64; 3]], com: &[f64; 3]) -> f64 {
+    let hull: Vec<Point2<f64>> = polygon.iter().map(|p| Point2::new(p[0], p[1])).collect();
+    let height = com[2] - polygon.iter().map(|p| p[2]).sum::<f64>() / polygon.len() as f64;
+    minimum_support(&hull, &Point2::new(com[0], com[1]))
+        .map_or(f64::NAN, |m| m.distance_m.atan2(height).to_degrees())
+}
+
+fn centroid_xy(polygon: &[[f64; 3]]) -> Point2<f64> {
+    let hull: Vec<Point2<f64>> = polygon.iter().map(|p| Point2::new(p[0], p[1])).collect();
+    scarp_slam::geometry::polygon_centroid(&hull).unwrap_or(hull[0])
+}
+
+fn world_from_map(target_dir: &Path) -> Result<Isometry3<f64>> {
+    let truth = read_tum_trajectory(&target_dir.join("keyframes_groundtruth.txt"))?;
+    let ba = read_tum_trajectory(&target_dir.join("keyframes_ba.txt"))?;
+    let source: Vec<Vector3<f64>> = ba
+        .iter()
+        .map(|p| p.world_from_camera.translation.vector)
+        .collect();
+    let target: Vec<Vector3<f64>> = truth
+        .iter()
+        .map(|p| p.world_from_camera.translation.vector)
+        .collect();
+    let s = umeyama(&source, &target, false)?;
+    Ok(Isometry3::from_parts(
+        s.translation.into(),
+        nalgebra::UnitQuaternion::from_rotation_matrix(&s.rotation),
+    ))
+}
+
+fn main() -> Result<()> {
+    let dir = PathBuf::from(std::env::args().nth(1).context("usage: CAMPAIGN_DIR")?);
+    let config: FragilityConfig = match std::env::args().nth(2) {
+        Some(path) => toml::from_str(&std::fs::read_to_string(path)?)?,
+        None => FragilityConfig::default(),
+    };
+    let mut errors: Vec<f64> = Vec::new();
+    let mut refused = 0usize;
+    println!(
+        "world seed id shape | a_gt a_map err | dh_mm area_ratio dc_cm dcom_cm dcomz_cm | a(scanC,trueCOM) a(trueC,scanCOM)"
+    );
+    let mut runs: Vec<PathBuf> = glob_runs(&dir)?;
+    runs.sort();
+    for run in runs {
+        let mission: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(run.join("mission.json"))?)?;
+        let world = World::load(&run.join("world_gt/world.toml"))
+            .with_context(|| format!("world of {}", run.display()))?;
+        let shapes: HashMap<u32, String> = world
+            .config
+            .rocks
+            .iter()
+            .map(|r| (r.id, r.shape_label()))
+            .collect();
+        for t in mission["targets"].as_array().into_iter().flatten() {
+            let (Some(id), Some(gt_id)) = (t["id"].as_u64(), t["gt_rock_id"].as_u64()) else {
+                continue;
+            };
+            let target_dir = run.join("targets").join(id.to_string());
+            let Ok(mesh) = read_mesh(target_dir.join("mesh.ply")) else {
+                continue;
+            };
+            let rock = world.rock(gt_id as u32).context("gt rock")?;
+            let Some(pedestal) = &rock.pedestal else {
+                continue;
+            };
+            let truth = analyze(&rock.mesh, ContactSpec::Pedestal(pedestal), &config)?;
+            let label = format!(
+                "{} {} {} {}",
+                run.parent().unwrap().file_name().unwrap().to_string_lossy(),
+                run.file_name().unwrap().to_string_lossy(),
+                gt_id,
+                shapes.get(&(gt_id as u32)).cloned().unwrap_or_default()
+            );
+            let map_analysis = analyze_scan(&mesh, &config).map(|(_, a)| a.report);
+            if let Ok(r) = &map_analysis {
+                println!(
+                    "INTERVAL {} {:.3} {:.3} {:.3} {:.3}",
+                    label.replace(' ', "_"),
+                    truth.alpha_min_deg,
+                    r.alpha_min_deg,
+                    r.alpha_min_low_deg,
+                    r.alpha_min_high_deg
+                );
+            }
+            let map_alpha = map_analysis.map(|r| r.alpha_min_deg);
+            let mut world_mesh = mesh.clone();
+            world_mesh.transform(&world_from_map(&target_dir)?);
+            if std::env::var("PROFILE").is_ok_and(|v| v == label) {
+                print_profiles(&truth, &rock.mesh, &world_mesh);
+            }
+            match (map_alpha, analyze_scan(&world_mesh, &config)) {
+                (Ok(a_map), Ok((_, analysis))) => {
+                    print_row(&label, &truth, a_map, &analysis.report);
+                    errors.push(a_map - truth.alpha_min_deg);
+                }
+                (Err(e), _) | (_, Err(e)) => {
+                    refused += 1;
+                    println!("{label} | {:.2} refused: {e}", truth.alpha_min_deg);
+                }
+            }
+        }
+    }
+    let total = errors.len() + refused;
+    let within = errors.iter().filter(|e| e.abs() <= 2.0).count();
+    let over = errors.iter().filter(|e| **e > 3.0).count();
+    let mut sorted = errors.clone();
+    sorted.sort_by(f64::total_cmp);
+    println!(
+        "TOTAL {total}: within 2° {within} ({:.0}%), refused {refused}, over 3° {over}, median {:+.2}, worst {:+.2}",
+        100.0 * within as f64 / total as f64,
+        sorted.get(sorted.len() / 2).copied().unwrap_or(f64::NAN),
+        sorted.last().copied().unwrap_or(f64::NAN),
+    );
+    Ok(())
+}
+
+fn print_row(label: &str, truth: &FragilityReport, a_map: f64, scan: &FragilityReport) {
+    let dh_mm = (scan.contact_height_m - truth.contact_height_m) * 1e3;
+    let area_ratio = scan.contact_area_m2 / truth.contact_area_m2;
+    let dc_cm =
+        (centroid_xy(&scan.contact_polygon) - centroid_xy(&truth.contact_polygon)).norm() * 100.0;
+    let dcom = Vector3::from(scan.center_of_mass) - Vector3::from(truth.center_of_mass);
+    println!(
+        "{label} | {:.2} {:.2} {:+.2} | {:+.0} {:.2} {:.1} {:.1} {:+.1} | {:.2} {:.2}",
+        truth.alpha_min_deg,
+        a_map,
+        a_map - truth.alpha_min_deg,
+        dh_mm,
+        area_ratio,
+        dc_cm,
+        dcom.xy().norm() * 100.0,
+        dcom.z * 100.0,
+        alpha_deg(&scan.contact_polygon, &truth.center_of_mass),
+        alpha_deg(&truth.contact_polygon, &scan.center_of_mass),
+    );
+}
+
+fn glob_runs(dir: &Path) -> Result<Vec<PathBuf>> {
+    let mut out = Vec::new();
+    for world in std::fs::read_dir(dir.join("runs"))? {
+        for seed in std::fs::read_dir(world?.path())? {
+            let p = seed?.path();
+            if p.join("mission.json").exists() {
+                out.push(p);
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// Per-sector largest radius of each mesh's vertices in 1 cm slabs above the true contact, around
+/// the true contact's centroid, and the true contact's radius in that sector.
+fn print_profiles(
+    truth: &FragilityReport,
+    rock: &scarp_slam::TriangleMesh,
+    scan: &scarp_slam::TriangleMesh,
+) {
+    let axis = centroid_xy(&truth.contact_polygon);
+    let plane = truth.contact_height_m;
+    let sectors = 12;
+    let radii = |mesh: &scarp_slam::TriangleMesh| {
+        let mut r = vec![vec![0.0f64; 16]; sectors];
+        for p in &mesh.positions {
+            let h = f64::from(p.z) - plane;
+            if !(0.0..0.16).contains(&h) {
+                continue;
+            }
+            let d = Point2::new(f64::from(p.x), f64::from(p.y)) - axis;
+            let s = ((d.y.atan2(d.x).rem_euclid(std::f64::consts::TAU)) / std::f64::consts::TAU
+                * sectors as f64) as usize
+                % sectors;
+            let k = (h / 0.01) as usize;
+            r[s][k] = r[s][k].max(d.norm());
+        }
+        r
+    };
+    let (rt, rs) = (radii(rock), radii(scan));
+    for s in 0..sectors {
+        let row = |r: &Vec<f64>| {
+            r.iter()
+                .map(|v| format!("{:3.0}", v * 100.0))
+                .collect::<Vec<_>>()
+                .join("")
+        };
+        println!(
+            "sector {s:2} truth {}\n          scan  {}",
+            row(&rt[s]),
+            row(&rs[s])
+        );
+    }
+}
