@@ -5,8 +5,13 @@
 //! contact or the true centre of mass swapped in.
 //!
 //! ```text
-//! cargo run --release --example contact_diagnosis -- CAMPAIGN_DIR
+//! cargo run --release --example contact_diagnosis -- CAMPAIGN_DIR [FRAGILITY_TOML [OUT_DIR]]
 //! ```
+//!
+//! With `OUT_DIR`, each run's `mission.json` is written there with its targets' α_min, interval
+//! and true α_min re-analysed (and `world_gt/world.json` beside it), so that
+//! `scarp campaign --tabulate-only --out OUT_DIR` tabulates the new analysis of the same
+//! flights.
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -55,10 +60,11 @@ fn world_from_map(target_dir: &Path) -> Result<Isometry3<f64>> {
 fn main() -> Result<()> {
     let dir = PathBuf::from(std::env::args().nth(1).context("usage: CAMPAIGN_DIR")?);
     let config: FragilityConfig = match std::env::args().nth(2) {
-        Some(path) => toml::from_str(&std::fs::read_to_string(path)?)?,
-        None => FragilityConfig::default(),
+        Some(path) if !path.is_empty() => toml::from_str(&std::fs::read_to_string(path)?)?,
+        Some(_) | None => FragilityConfig::default(),
     };
     let mut errors: Vec<f64> = Vec::new();
+    let mut written: Vec<(PathBuf, serde_json::Value)> = Vec::new();
     let mut refused = 0usize;
     println!(
         "world seed id shape | a_gt a_map err | dh_mm area_ratio dc_cm dcom_cm dcomz_cm | a(scanC,trueCOM) a(trueC,scanCOM)"
@@ -66,7 +72,7 @@ fn main() -> Result<()> {
     let mut runs: Vec<PathBuf> = glob_runs(&dir)?;
     runs.sort();
     for run in runs {
-        let mission: serde_json::Value =
+        let mut mission: serde_json::Value =
             serde_json::from_str(&std::fs::read_to_string(run.join("mission.json"))?)?;
         let world = World::load(&run.join("world_gt/world.toml"))
             .with_context(|| format!("world of {}", run.display()))?;
@@ -76,7 +82,7 @@ fn main() -> Result<()> {
             .iter()
             .map(|r| (r.id, r.shape_label()))
             .collect();
-        for t in mission["targets"].as_array().into_iter().flatten() {
+        for t in mission["targets"].as_array_mut().into_iter().flatten() {
             let (Some(id), Some(gt_id)) = (t["id"].as_u64(), t["gt_rock_id"].as_u64()) else {
                 continue;
             };
@@ -97,6 +103,7 @@ fn main() -> Result<()> {
                 shapes.get(&(gt_id as u32)).cloned().unwrap_or_default()
             );
             let map_analysis = analyze_scan(&mesh, &config).map(|(_, a)| a.report);
+            update_target(t, &map_analysis, &truth);
             if let Ok(r) = &map_analysis {
                 println!(
                     "INTERVAL {} {:.3} {:.3} {:.3} {:.3}",
@@ -124,8 +131,24 @@ fn main() -> Result<()> {
                 }
             }
         }
+        written.push((run.clone(), mission));
     }
     let total = errors.len() + refused;
+    if let Some(out) = std::env::args().nth(3) {
+        for (run, mission) in &written {
+            let rel = run.strip_prefix(&dir)?;
+            let target = Path::new(&out).join(rel);
+            std::fs::create_dir_all(target.join("world_gt"))?;
+            std::fs::write(
+                target.join("mission.json"),
+                serde_json::to_string_pretty(mission)?,
+            )?;
+            std::fs::copy(
+                run.join("world_gt/world.json"),
+                target.join("world_gt/world.json"),
+            )?;
+        }
+    }
     let within = errors.iter().filter(|e| e.abs() <= 2.0).count();
     let over = errors.iter().filter(|e| **e > 3.0).count();
     let mut sorted = errors.clone();
@@ -212,5 +235,47 @@ fn print_profiles(
             row(&rt[s]),
             row(&rs[s])
         );
+    }
+}
+
+/// Rewrites a `mission.json` target's fragility figures from a new analysis: α_min, its interval,
+/// the toppling acceleration, the truth and the error; a refusal clears them and records why, and
+/// moves a mapped target to incomplete (as the mission does).
+fn update_target(
+    t: &mut serde_json::Value,
+    analysis: &Result<FragilityReport, scarp::fragility::FragilityError>,
+    truth: &FragilityReport,
+) {
+    t["alpha_min_gt_deg"] = truth.alpha_min_deg.into();
+    let fragility_error = t["error"]
+        .as_str()
+        .is_none_or(|e| e.starts_with("fragility:"));
+    match analysis {
+        Ok(r) => {
+            t["alpha_min_deg"] = r.alpha_min_deg.into();
+            t["alpha_min_low_deg"] = r.alpha_min_low_deg.into();
+            t["alpha_min_high_deg"] = r.alpha_min_high_deg.into();
+            t["toppling_pga_g"] = r.toppling_pga_g.into();
+            t["alpha_error_deg"] = (r.alpha_min_deg - truth.alpha_min_deg).abs().into();
+            if fragility_error {
+                t["error"] = serde_json::Value::Null;
+                t["status"] = "mapped".into();
+            }
+        }
+        Err(e) => {
+            for key in [
+                "alpha_min_deg",
+                "alpha_min_low_deg",
+                "alpha_min_high_deg",
+                "toppling_pga_g",
+                "alpha_error_deg",
+            ] {
+                t[key] = serde_json::Value::Null;
+            }
+            if fragility_error {
+                t["error"] = format!("fragility: {e}").into();
+                t["status"] = "incomplete".into();
+            }
+        }
     }
 }
