@@ -900,7 +900,20 @@ pub fn analyze_closed_scan(
         &closed.mesh,
         ContactSpec::Polygon(&closed.contact_polygon),
         config,
-    )?;
+    )
+    .map_err(|e| match e {
+        // The scanned rock does stand: its extrapolated contact is what is wrong.
+        FragilityError::ComOutsideContact {
+            distance_m,
+            azimuth_deg,
+        } => FragilityError::Degenerate(format!(
+            "the contact is hidden: the centre of mass lies {distance_m:.3} m outside the \
+             contact extrapolated from the scan (towards azimuth {azimuth_deg:.0}°), so the \
+             base touches where no camera saw it, flush with or overhanging its support; \
+             map the base from lower views"
+        )),
+        e => e,
+    })?;
     let hypotheses = ContactHypothesis::ensemble(1.96 * config.uncertainty.contact_height_sigma_m);
     let alphas: Vec<f64> = hypotheses
         .iter()
@@ -1108,6 +1121,25 @@ mod tests {
             narrow.report.alpha_min_low_deg,
             truth.alpha_min_deg
         );
+    }
+
+    #[test]
+    fn a_rock_leaning_past_its_seen_base_is_refused_as_a_hidden_contact() {
+        // The wedge scan's rock, sheared so that its top stands 0.9 m east of its base: over the
+        // extrapolated contact its centre of mass would fall, so the contact must lie where no
+        // camera saw it.
+        let (scan, _) = wedge_scan();
+        let mut leaning = scan.clone();
+        for p in &mut leaning.positions {
+            let above = f64::from(p.z) - 1.05;
+            if above > 0.0 {
+                p.x += (0.9 * above / 1.4) as f32;
+            }
+        }
+        let error = analyze_scan(&leaning, &FragilityConfig::default())
+            .unwrap_err()
+            .to_string();
+        assert!(error.contains("the contact is hidden"), "{error}");
     }
 
     #[test]
