@@ -18,10 +18,10 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use nalgebra::{Isometry3, Point2, Vector3};
-use scarp::evaluation::trajectory::umeyama;
 use scarp::fragility::rocking::minimum_support;
 use scarp::fragility::scan::analyze_scan;
 use scarp::fragility::{ContactSpec, FragilityConfig, FragilityReport, analyze};
+use scarp::mission::mapping::map_to_world;
 use scarp_datasets::world::World;
 use scarp_export::ply::read_mesh;
 use scarp_export::tum::read_tum_trajectory;
@@ -41,20 +41,11 @@ fn centroid_xy(polygon: &[[f64; 3]]) -> Point2<f64> {
 
 fn world_from_map(target_dir: &Path) -> Result<Isometry3<f64>> {
     let truth = read_tum_trajectory(&target_dir.join("keyframes_groundtruth.txt"))?;
-    let ba = read_tum_trajectory(&target_dir.join("keyframes_ba.txt"))?;
-    let source: Vec<Vector3<f64>> = ba
+    let ba: Vec<Isometry3<f64>> = read_tum_trajectory(&target_dir.join("keyframes_ba.txt"))?
         .iter()
-        .map(|p| p.world_from_camera.translation.vector)
+        .map(|p| p.world_from_camera)
         .collect();
-    let target: Vec<Vector3<f64>> = truth
-        .iter()
-        .map(|p| p.world_from_camera.translation.vector)
-        .collect();
-    let s = umeyama(&source, &target, false)?;
-    Ok(Isometry3::from_parts(
-        s.translation.into(),
-        nalgebra::UnitQuaternion::from_rotation_matrix(&s.rotation),
-    ))
+    map_to_world(&truth, &ba).context("aligning the keyframes to the truth")
 }
 
 fn main() -> Result<()> {

@@ -322,7 +322,8 @@ fn ate_rmse(truth: &[StampedPose], poses: &[Isometry3<f64>]) -> Option<f64> {
 
 /// The rigid transform that best maps the mapping trajectory's camera centres onto the true
 /// ones (Umeyama, no scale): the map frame's offset from the world, the GPS error at mapping.
-fn map_to_world(truth: &[StampedPose], poses: &[Isometry3<f64>]) -> Option<Isometry3<f64>> {
+/// `None` when the camera centres are too few or degenerate for an alignment.
+pub fn map_to_world(truth: &[StampedPose], poses: &[Isometry3<f64>]) -> Option<Isometry3<f64>> {
     let source: Vec<Vector3<f64>> = poses.iter().map(|p| p.translation.vector).collect();
     let target: Vec<Vector3<f64>> = truth
         .iter()
