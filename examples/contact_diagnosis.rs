@@ -93,7 +93,54 @@ fn main() -> Result<()> {
                 gt_id,
                 shapes.get(&(gt_id as u32)).cloned().unwrap_or_default()
             );
-            let map_analysis = analyze_scan(&mesh, &config).map(|(_, a)| a.report);
+            let map_result = analyze_scan(&mesh, &config);
+            if let Ok((closed, a)) = &map_result {
+                let readings: Vec<String> = scarp::fragility::scan::ContactHypothesis::ensemble(
+                    1.96 * config.uncertainty.contact_height_sigma_m,
+                )
+                .iter()
+                .map(|h| {
+                    closed
+                        .contact_under(h)
+                        .ok()
+                        .and_then(|p| a.alpha_min_on_contact(&p))
+                        .map_or("nan".into(), |v| format!("{v:.3}"))
+                })
+                .collect();
+                println!(
+                    "READINGS {} {:.3} {}",
+                    label.replace(' ', "_"),
+                    truth.alpha_min_deg,
+                    readings.join(" ")
+                );
+                let sectors = closed.profile.radius_m.len();
+                let near = closed
+                    .profile
+                    .radius_m
+                    .iter()
+                    .filter(|r| r.iter().take(4).any(|&v| v > 0.0))
+                    .count();
+                println!(
+                    "FEATURES {} {:.3} {:.3} {:.3} {:.3} {:.3} {:.3} {:.3} {} {:.3}",
+                    label.replace(' ', "_"),
+                    truth.alpha_min_deg,
+                    a.report.alpha_min_deg,
+                    a.report
+                        .alpha_interval
+                        .contact_alpha_low_deg
+                        .unwrap_or(f64::NAN),
+                    a.report
+                        .alpha_interval
+                        .contact_alpha_high_deg
+                        .unwrap_or(f64::NAN),
+                    near as f64 / sectors as f64,
+                    closed.contact_height_m - closed.neck_height_m,
+                    closed.filled_area_m2 / (closed.filled_area_m2 + closed.scanned_area_m2),
+                    closed.support_plane_found,
+                    a.report.rock_height_m,
+                );
+            }
+            let map_analysis = map_result.map(|(_, a)| a.report);
             update_target(t, &map_analysis, &truth);
             if let Ok(r) = &map_analysis {
                 println!(

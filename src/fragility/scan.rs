@@ -81,12 +81,23 @@ pub struct ScanConfig {
     pub profile_min_near_fraction: f64,
     /// The α_min interval of a scan is widened by this fraction of each end (the low end times
     /// 1 − f, the high end times 1 + f): the error of the contact extrapolation that the
-    /// readings do not span, which grows with α. Default 0.5, the smallest tenth that put the
-    /// truth inside on 90% of the 80 analysed targets of a 3-world × 10-seed campaign (held out
-    /// one world at a time it covered 96%, 94% and 77%).
+    /// readings do not span, which grows with α. Default 0.2 with 1° below: on the 67 targets
+    /// analysed in a 3-world × 10-seed campaign these put the truth inside on 93% (96%, 93% and
+    /// 88% per world), the narrowest of the tried margins to reach 90% (median width 6.8°).
     pub interval_relative_margin: f64,
-    /// ... and then by this many degrees at each end. Default 0.5.
+    /// ... and then by this many degrees at each end. Default 1.0.
     pub interval_margin_deg: f64,
+    /// Of 12 sectors around the rock's axis, how many an upward-facing ring must fill to be the
+    /// support's top. Default 7: the rock's overhang hides the top on some sides.
+    pub support_min_sectors: usize,
+    /// A support plane found more than this far above the neck is refused: the narrowest
+    /// section is then not the contact (the pedestal or a ledge was taken for the rock),
+    /// metres. Default 0.005.
+    pub max_plane_above_neck_m: f64,
+    /// A closed rock whose patches over unseen parts (and the cut) exceed this fraction of its
+    /// surface is refused: too much of its shape, and so of its centre of mass, is guessed.
+    /// Default 0.5.
+    pub max_filled_fraction: f64,
 }
 
 impl Default for ScanConfig {
@@ -103,8 +114,11 @@ impl Default for ScanConfig {
             profile_fit_slabs: 4,
             profile_near_m: 0.05,
             profile_min_near_fraction: 2.0 / 3.0,
-            interval_relative_margin: 0.5,
-            interval_margin_deg: 0.5,
+            interval_relative_margin: 0.2,
+            support_min_sectors: 7,
+            max_plane_above_neck_m: 0.005,
+            max_filled_fraction: 0.5,
+            interval_margin_deg: 1.0,
         }
     }
 }
@@ -139,7 +153,15 @@ impl ScanConfig {
                 return bad(field, v.to_string(), "must be non-negative and finite");
             }
         }
+        if !(1..=SECTORS).contains(&self.support_min_sectors) {
+            return bad(
+                "scan.support_min_sectors",
+                self.support_min_sectors.to_string(),
+                "must be in 1..=12",
+            );
+        }
         for (field, v) in [
+            ("scan.max_filled_fraction", self.max_filled_fraction),
             ("scan.neck_narrowing", self.neck_narrowing),
             (
                 "scan.profile_min_near_fraction",
@@ -186,10 +208,10 @@ pub struct ClosedScan {
     /// Whether the support's top was found as a plane ([`ClosedScan::contact_height_m`] is then
     /// its height, else the narrowest slab's).
     pub support_plane_found: bool,
-    /// The extrapolated contact polygon at [`ClosedScan::contact_height_m`], counter-clockwise,
-    /// world frame, metres: [`ContactHypothesis::POINT_ESTIMATE`] (over
-    /// [`ScanConfig::profile_fit_slabs`]) clipped by
-    /// [`ClosedScan::support_outline`].
+    /// The extrapolated contact polygon, counter-clockwise, world frame, metres:
+    /// [`ContactHypothesis::POINT_ESTIMATE`] (over [`ScanConfig::profile_fit_slabs`]) at
+    /// [`ClosedScan::contact_height_m`], clipped by [`ClosedScan::support_outline`]; after
+    /// [`analyze_scan`], the median reading it analysed.
     pub contact_polygon: Vec<[f64; 3]>,
     /// The basal profile the contact is extrapolated from.
     pub profile: BasalProfile,
@@ -198,6 +220,12 @@ pub struct ClosedScan {
     pub support_outline: Option<Vec<Point2<f64>>>,
     /// Boundary loops that were closed (the cut plus holes).
     pub loops_closed: usize,
+    /// Height of the neck the support plane was searched around, metres.
+    pub neck_height_m: f64,
+    /// Area of the scanned surface kept as the rock, m².
+    pub scanned_area_m2: f64,
+    /// Area added to close it (the cut and every unseen hole), m².
+    pub filled_area_m2: f64,
 }
 
 /// Upward-facing faces count toward the support plane when their normal is within this cosine
@@ -205,8 +233,6 @@ pub struct ClosedScan {
 const UP_COS: f64 = 0.95;
 /// Height bins of the support-plane search, metres.
 const SUPPORT_BIN_M: f64 = 0.005;
-/// Sectors of [`SECTORS`] an upward ring must fill to be the support (it circles the rock).
-const SUPPORT_MIN_SECTORS: usize = 9;
 /// The band below the support plane whose surface outlines the support's top: from 1.5 cm
 /// (below the wedge the TSDF fills) to 6 cm under the plane, metres.
 const SUPPORT_BAND_M: (f64, f64) = (0.015, 0.06);
@@ -264,7 +290,7 @@ fn sector_of(p: &Point2<f64>, axis_xy: &Point2<f64>, sectors: usize) -> usize {
 /// The height of the support's top (pedestal or ground) under a scanned rock: the highest level
 /// from `support_search_above_m` above `neck_z` to `support_search_below_m` below it where
 /// upward-facing faces fill at least
-/// [`SUPPORT_MIN_SECTORS`] of [`SECTORS`] sectors around `axis_xy`; the area-weighted mean height
+/// `support_min_sectors` of [`SECTORS`] sectors around `axis_xy`; the area-weighted mean height
 /// of the faces within a bin of it. `None` when no level qualifies (the support is not seen
 /// all round).
 fn support_plane_height(
@@ -299,7 +325,7 @@ fn support_plane_height(
             .iter()
             .filter(|(fz, _, _)| (fz - z).abs() <= 0.5 * SUPPORT_BIN_M)
             .map(|&(_, _, sector)| sector);
-        (sectors_filled(at_level) >= SUPPORT_MIN_SECTORS).then_some(z)
+        (sectors_filled(at_level) >= config.support_min_sectors).then_some(z)
     })?;
     let (sum, area) = faces
         .iter()
@@ -694,6 +720,17 @@ fn manifold_faces(faces: &[[u32; 3]]) -> Vec<[u32; 3]> {
         .collect()
 }
 
+/// Total area of `mesh`'s faces, m².
+fn surface_area(mesh: &TriangleMesh) -> f64 {
+    mesh.faces
+        .iter()
+        .map(|f| {
+            let [a, b, c] = f.map(|v| mesh.positions[v as usize].cast::<f64>());
+            0.5 * (b - a).cross(&(c - a)).norm()
+        })
+        .sum()
+}
+
 /// Closes every boundary loop of `mesh` with a fan around the loop's centroid. Returns the
 /// number of loops closed.
 fn fill_holes(mesh: &mut TriangleMesh) -> usize {
@@ -782,6 +819,15 @@ pub fn close_scan(mesh: &TriangleMesh, config: &ScanConfig) -> Result<ClosedScan
     config.validate()?;
     let (neck_z, axis_xy) = find_neck(mesh, config)?;
     let plane_z = support_plane_height(mesh, &axis_xy, neck_z, config);
+    if let Some(z) = plane_z
+        && z - neck_z > config.max_plane_above_neck_m
+    {
+        return Err(FragilityError::Degenerate(format!(
+            "the support's top was found {:.3} m above the narrowest section of the scan: the \
+             neck is not the rock's contact (the pedestal or the ground may be taken for rock)",
+            z - neck_z
+        )));
+    }
     let contact_height_m = plane_z.unwrap_or(neck_z);
     let cut_z = plane_z.map_or(neck_z, |z| z + config.cut_above_support_m);
     let weld = welded_vertices(mesh);
@@ -835,7 +881,18 @@ pub fn close_scan(mesh: &TriangleMesh, config: &ScanConfig) -> Result<ClosedScan
     .iter()
     .map(|p| [p.x, p.y, contact_height_m])
     .collect();
+    let scanned_area_m2 = surface_area(&rock);
     let loops_closed = fill_holes(&mut rock);
+    let filled_area_m2 = surface_area(&rock) - scanned_area_m2;
+    let filled_fraction = filled_area_m2 / (filled_area_m2 + scanned_area_m2);
+    if filled_fraction > config.max_filled_fraction {
+        return Err(FragilityError::Degenerate(format!(
+            "{:.0}% of the closed rock's surface patches parts no camera saw (more than {:.0}%): \
+             its shape and centre of mass would be guessed (map it from more views)",
+            100.0 * filled_fraction,
+            100.0 * config.max_filled_fraction
+        )));
+    }
     Ok(ClosedScan {
         mesh: rock,
         contact_height_m,
@@ -844,6 +901,9 @@ pub fn close_scan(mesh: &TriangleMesh, config: &ScanConfig) -> Result<ClosedScan
         profile,
         support_outline,
         loops_closed,
+        neck_height_m: neck_z,
+        scanned_area_m2,
+        filled_area_m2,
     })
 }
 
@@ -868,58 +928,71 @@ impl ClosedScan {
     }
 }
 
-/// The fragility of a scanned rock: [`close_scan`], then [`analyze_detailed`] with the
-/// extrapolated contact polygon ([`ContactSpec::Polygon`]). `config.up` should be +z, the
-/// scan's up.
-///
-/// The α_min interval spans the contact readings of [`ContactHypothesis::ensemble`] (the plane
-/// moved by ±1.96 σ of [`super::UncertaintyConfig::contact_height_sigma_m`]), widened by the
-/// mesh-noise spread of the perturbation study and by [`ScanConfig::interval_relative_margin`]
-/// and [`ScanConfig::interval_margin_deg`].
+/// The fragility of a scanned rock: [`close_scan`], then [`analyze_closed_scan`]. The returned
+/// scan's `contact_polygon` is the contact the analysis used (the median reading). `config.up`
+/// should be +z, the scan's up.
 ///
 /// # Errors
-/// Those of [`close_scan`] and [`analyze_detailed`].
+/// Those of [`close_scan`] and [`analyze_closed_scan`].
 pub fn analyze_scan(
     mesh: &TriangleMesh,
     config: &FragilityConfig,
 ) -> Result<(ClosedScan, FragilityAnalysis), FragilityError> {
-    let closed = close_scan(mesh, &config.scan)?;
+    let mut closed = close_scan(mesh, &config.scan)?;
     let analysis = analyze_closed_scan(&closed, config)?;
+    closed
+        .contact_polygon
+        .clone_from(&analysis.report.contact_polygon);
     Ok((closed, analysis))
 }
 
-/// The analysis of [`analyze_scan`] on a scan already closed by [`close_scan`].
+/// The fragility of a scan closed by [`close_scan`]: [`analyze_detailed`] on the contact
+/// reading whose α_min is the median of [`ContactHypothesis::ensemble`]'s 36 readings (the
+/// plane moved by ±1.96 σ of [`super::UncertaintyConfig::contact_height_sigma_m`]); no single
+/// profile model or fit window holds for every shape of base. The α_min interval spans the
+/// readings, widened by the mesh-noise spread of the perturbation study and by
+/// [`ScanConfig::interval_relative_margin`] and [`ScanConfig::interval_margin_deg`].
 ///
 /// # Errors
-/// Those of [`analyze_detailed`].
+/// Those of [`analyze_detailed`]; a centre of mass outside the extrapolated contact is a
+/// [`FragilityError::Degenerate`] naming the contact as hidden.
 pub fn analyze_closed_scan(
     closed: &ClosedScan,
     config: &FragilityConfig,
 ) -> Result<FragilityAnalysis, FragilityError> {
-    let mut analysis = analyze_detailed(
-        &closed.mesh,
-        ContactSpec::Polygon(&closed.contact_polygon),
-        config,
-    )
-    .map_err(|e| match e {
-        // The scanned rock does stand: its extrapolated contact is what is wrong.
-        FragilityError::ComOutsideContact {
-            distance_m,
-            azimuth_deg,
-        } => FragilityError::Degenerate(format!(
-            "the contact is hidden: the centre of mass lies {distance_m:.3} m outside the \
-             contact extrapolated from the scan (towards azimuth {azimuth_deg:.0}°), so the \
-             base touches where no camera saw it, flush with or overhanging its support; \
-             map the base from lower views"
-        )),
-        e => e,
-    })?;
+    let analyse = |polygon: &[[f64; 3]]| {
+        analyze_detailed(&closed.mesh, ContactSpec::Polygon(polygon), config).map_err(|e| {
+            match e {
+                // The scanned rock does stand: its extrapolated contact is what is wrong.
+                FragilityError::ComOutsideContact {
+                    distance_m,
+                    azimuth_deg,
+                } => FragilityError::Degenerate(format!(
+                    "the contact is hidden: the centre of mass lies {distance_m:.3} m outside \
+                     the contact extrapolated from the scan (towards azimuth \
+                     {azimuth_deg:.0}°), so the base touches where no camera saw it, flush \
+                     with or overhanging its support; map the base from lower views"
+                )),
+                e => e,
+            }
+        })
+    };
+    let first = analyse(&closed.contact_polygon)?;
     let hypotheses = ContactHypothesis::ensemble(1.96 * config.uncertainty.contact_height_sigma_m);
-    let alphas: Vec<f64> = hypotheses
+    // (α_min, polygon) of each reading; the centre of mass hardly moves with the plane's
+    // millimetres, so the first analysis's serves them all.
+    let mut readings: Vec<(f64, Vec<[f64; 3]>)> = hypotheses
         .iter()
         .filter_map(|h| closed.contact_under(h).ok())
-        .filter_map(|polygon| analysis.alpha_min_on_contact(&polygon))
+        .filter_map(|polygon| Some((first.alpha_min_on_contact(&polygon)?, polygon)))
         .collect();
+    // A stable sort, so ties keep the ensemble's order and the choice is deterministic.
+    readings.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut analysis = match readings.get(readings.len().saturating_sub(1) / 2) {
+        Some((_, median)) if *median != closed.contact_polygon => analyse(median)?,
+        _ => first,
+    };
+    let alphas: Vec<f64> = readings.iter().map(|(a, _)| *a).collect();
     analysis.widen_interval(
         &alphas,
         hypotheses.len() - alphas.len(),
@@ -1058,11 +1131,16 @@ mod tests {
         );
         let r = &analysis.report;
         assert_eq!(r.contact_method, super::super::ContactMethod::Polygon);
-        // The scan's section 1.5 cm up is 14% wider than the contact; the extrapolation is
-        // within 5%.
+        // The scan's section 1.5 cm up is 14% wider than the contact. The r² reading, exact for
+        // an ellipsoid, is within 5%; the median of all readings (r² and r models), which the
+        // analysis uses, within 10%.
+        let r2 = close_scan(&scan, &config.scan).unwrap().contact_polygon;
+        let r2_hull: Vec<Point2<f64>> = r2.iter().map(|p| Point2::new(p[0], p[1])).collect();
+        let r2_ratio = polygon_signed_area(&r2_hull) / truth.contact_area_m2;
+        assert!((0.95..1.05).contains(&r2_ratio), "r² reading {r2_ratio}");
         let area_ratio = r.contact_area_m2 / truth.contact_area_m2;
         assert!(
-            (0.95..1.05).contains(&area_ratio),
+            (0.95..1.10).contains(&area_ratio),
             "contact {} m² vs {} m²",
             r.contact_area_m2,
             truth.contact_area_m2
@@ -1106,7 +1184,7 @@ mod tests {
             r.alpha_min_low_deg,
             r.alpha_min_high_deg
         );
-        // Not vacuous: the margins are ±50% and 0.5° about the readings' span.
+        // Not vacuous: the margins are ±20% and 1° about the readings' span.
         assert!(r.alpha_min_high_deg - r.alpha_min_low_deg < 1.3 * r.alpha_min_deg + 2.0);
         assert_eq!(r.alpha_interval.source, "scan_contact");
         assert_eq!(r.alpha_interval.contact_hypotheses, 36);
