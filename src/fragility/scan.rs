@@ -77,14 +77,14 @@ pub struct ScanConfig {
     pub profile_near_m: f64,
     /// At least this fraction of the sectors must be seen near the support, or the scan is
     /// refused: a base seen on one side only extrapolates to a contact in the wrong place.
-    /// Default 2/3.
+    /// Default 0.8: in a 3-world × 10-seed campaign, targets whose base was seen in fewer than
+    /// 80% of the directions had a median α error of 5.7°, against 1.2° above.
     pub profile_min_near_fraction: f64,
     /// The α_min interval of a scan is widened by this fraction of each end (the low end times
     /// 1 − f, the high end times 1 + f): the error of the contact extrapolation that the
-    /// readings do not span, which grows with α. Default 0.2 with 1° below. On the 74 targets
-    /// analysed in a 3-world × 10-seed campaign these put the truth inside on 85% (median width
-    /// 7.3°). Wider margins do not reach 90%: the misses are whole failures of the cut (a slab
-    /// on edge cut at the ground, a block flush with its pedestal), which no margin covers.
+    /// readings do not span, which grows with α. Default 0.1 with 1° below. On the 55 targets
+    /// analysed in a 3-world × 10-seed campaign these put the truth inside on 52 (95%; per
+    /// world 95%, 92% and 100%), median width 5.2°.
     pub interval_relative_margin: f64,
     /// ... and then by this many degrees at each end. Default 1.0.
     pub interval_margin_deg: f64,
@@ -93,7 +93,8 @@ pub struct ScanConfig {
     pub support_min_sectors: usize,
     /// A closed rock whose patches over unseen parts (and the cut) exceed this fraction of its
     /// surface is refused: too much of its shape, and so of its centre of mass, is guessed.
-    /// Default 0.5.
+    /// Default 0.4: in a 3-world × 10-seed campaign, targets patched over 40–50% had a median α
+    /// error of 12°, against 1.2° below 40%.
     pub max_filled_fraction: f64,
 }
 
@@ -110,10 +111,10 @@ impl Default for ScanConfig {
             profile_last_m: 0.15,
             profile_fit_slabs: 4,
             profile_near_m: 0.05,
-            profile_min_near_fraction: 2.0 / 3.0,
-            interval_relative_margin: 0.2,
+            profile_min_near_fraction: 0.8,
+            interval_relative_margin: 0.1,
             support_min_sectors: 7,
-            max_filled_fraction: 0.5,
+            max_filled_fraction: 0.4,
             interval_margin_deg: 1.0,
         }
     }
@@ -1171,7 +1172,7 @@ mod tests {
             r.alpha_min_low_deg,
             r.alpha_min_high_deg
         );
-        // Not vacuous: the margins are ±20% and 1° about the readings' span.
+        // Not vacuous: the margins are ±10% and 1° about the readings' span.
         assert!(r.alpha_min_high_deg - r.alpha_min_low_deg < 1.3 * r.alpha_min_deg + 2.0);
         assert_eq!(r.alpha_interval.source, "scan_contact");
         assert_eq!(r.alpha_interval.contact_hypotheses, 36);
