@@ -12,10 +12,26 @@ use rand_distr::{Distribution, StandardNormal};
 use scarp_export::tum::StampedPose;
 use serde::{Deserialize, Serialize};
 
-/// Noise levels of the state estimator.
+/// What the vehicle's position comes from: the defaults of every noise level.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum EstimatorPreset {
+    /// A consumer GNSS receiver fused with an IMU: the position walks by σ 0.5 m horizontally
+    /// and 0.8 m vertically.
+    #[default]
+    Gps,
+    /// RTK GNSS, as survey drones carry: σ 2 cm horizontally and 3 cm vertically. The attitude
+    /// (from the IMU) is as with `gps`.
+    Rtk,
+}
+
+/// Noise levels of the state estimator. In a config file (`[estimator]`), `preset` sets the
+/// defaults and any other key overrides its value.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
+#[serde(from = "EstimatorTable")]
 pub struct EstimatorConfig {
+    /// The preset the other fields default to. Default `gps`.
+    pub preset: EstimatorPreset,
     /// Stationary σ of the horizontal GPS random walk, metres per axis. Default 0.5.
     pub horizontal_sigma_m: f64,
     /// Stationary σ of the vertical GPS random walk, metres. Default 0.8.
@@ -36,7 +52,52 @@ pub struct EstimatorConfig {
 
 impl Default for EstimatorConfig {
     fn default() -> Self {
+        Self::preset(EstimatorPreset::Gps)
+    }
+}
+
+/// `[estimator]` as written: a preset and any overrides.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct EstimatorTable {
+    #[serde(default)]
+    preset: EstimatorPreset,
+    horizontal_sigma_m: Option<f64>,
+    vertical_sigma_m: Option<f64>,
+    position_correlation_s: Option<f64>,
+    horizontal_white_m: Option<f64>,
+    vertical_white_m: Option<f64>,
+    roll_pitch_sigma_deg: Option<f64>,
+    yaw_sigma_deg: Option<f64>,
+    attitude_correlation_s: Option<f64>,
+}
+
+impl From<EstimatorTable> for EstimatorConfig {
+    fn from(t: EstimatorTable) -> Self {
+        let base = Self::preset(t.preset);
         Self {
+            preset: t.preset,
+            horizontal_sigma_m: t.horizontal_sigma_m.unwrap_or(base.horizontal_sigma_m),
+            vertical_sigma_m: t.vertical_sigma_m.unwrap_or(base.vertical_sigma_m),
+            position_correlation_s: t
+                .position_correlation_s
+                .unwrap_or(base.position_correlation_s),
+            horizontal_white_m: t.horizontal_white_m.unwrap_or(base.horizontal_white_m),
+            vertical_white_m: t.vertical_white_m.unwrap_or(base.vertical_white_m),
+            roll_pitch_sigma_deg: t.roll_pitch_sigma_deg.unwrap_or(base.roll_pitch_sigma_deg),
+            yaw_sigma_deg: t.yaw_sigma_deg.unwrap_or(base.yaw_sigma_deg),
+            attitude_correlation_s: t
+                .attitude_correlation_s
+                .unwrap_or(base.attitude_correlation_s),
+        }
+    }
+}
+
+impl EstimatorConfig {
+    /// The noise levels of `preset`.
+    pub fn preset(preset: EstimatorPreset) -> Self {
+        let gps = Self {
+            preset,
             horizontal_sigma_m: 0.5,
             vertical_sigma_m: 0.8,
             position_correlation_s: 30.0,
@@ -45,6 +106,16 @@ impl Default for EstimatorConfig {
             roll_pitch_sigma_deg: 0.5,
             yaw_sigma_deg: 2.0,
             attitude_correlation_s: 10.0,
+        };
+        match preset {
+            EstimatorPreset::Gps => gps,
+            EstimatorPreset::Rtk => Self {
+                horizontal_sigma_m: 0.02,
+                vertical_sigma_m: 0.03,
+                horizontal_white_m: 0.005,
+                vertical_white_m: 0.01,
+                ..gps
+            },
         }
     }
 }
@@ -170,6 +241,26 @@ impl StateEstimator {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_preset_sets_the_defaults_and_keys_override_it() {
+        let rtk: EstimatorConfig = toml::from_str("preset = \"rtk\"").unwrap();
+        assert_eq!(rtk, EstimatorConfig::preset(EstimatorPreset::Rtk));
+        assert_eq!((rtk.horizontal_sigma_m, rtk.vertical_sigma_m), (0.02, 0.03));
+        let tuned: EstimatorConfig =
+            toml::from_str("preset = \"rtk\"\nyaw_sigma_deg = 0.5").unwrap();
+        assert_eq!(tuned.yaw_sigma_deg, 0.5);
+        assert_eq!(tuned.horizontal_sigma_m, 0.02);
+        let gps: EstimatorConfig = toml::from_str("").unwrap();
+        assert_eq!(gps, EstimatorConfig::default());
+        assert_eq!(gps.horizontal_sigma_m, 0.5);
+        // What `scarp config` prints reads back as itself.
+        let printed = toml::to_string(&tuned).unwrap();
+        assert_eq!(toml::from_str::<EstimatorConfig>(&printed).unwrap(), tuned);
+        let error = toml::from_str::<EstimatorConfig>("preset = \"galileo\"").unwrap_err();
+        assert!(error.to_string().contains("galileo"), "{error}");
+        assert!(toml::from_str::<EstimatorConfig>("horizontal_sigma = 1.0").is_err());
+    }
 
     #[test]
     fn error_spread_matches_configuration() {

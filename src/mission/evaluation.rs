@@ -23,7 +23,9 @@ pub fn nearest_rock<'w>(world: &'w World, center: &Point3<f64>) -> Option<(&'w R
         .min_by(|a, b| a.1.total_cmp(&b.1))
 }
 
-/// Fills each target's `gt_rock_id`, `gt_role` and `localization_error_m`, and the report's
+/// Fills each target's `gt_rock_id`, `gt_role`, `localization_error_m` and (where the
+/// estimator's error at its localization is known) `localization_error_estimate_frame_m`, and
+/// the report's
 /// `distractors_mapped` and `targets_missed`.
 pub fn ground_truth_summary(world: &World, targets: &mut Catalog, report: &mut MissionReport) {
     for m in targets.values_mut() {
@@ -33,11 +35,16 @@ pub fn ground_truth_summary(world: &World, targets: &mut Catalog, report: &mut M
                 m.report.gt_rock_id = Some(rock.id);
                 m.report.gt_role = Some(rock.role.as_str().into());
                 m.report.localization_error_m = Some(distance);
+                m.report.localization_error_estimate_frame_m = m
+                    .report
+                    .estimator_error_at_localization_m
+                    .map(|e| (rock.centroid + nalgebra::Vector3::from(e) - center).norm());
             }
             None => {
                 m.report.gt_rock_id = None;
                 m.report.gt_role = None;
                 m.report.localization_error_m = None;
+                m.report.localization_error_estimate_frame_m = None;
             }
         }
     }
@@ -78,7 +85,11 @@ mod tests {
             .unwrap();
         let mut targets = Catalog::new();
         let off = nalgebra::Vector3::new(0.3, -0.4, 0.0);
-        targets.insert(1, target(rocks[0].centroid + off, TargetStatus::Mapped));
+        let mut biased = target(rocks[0].centroid + off, TargetStatus::Mapped);
+        // The estimator was off by 0.2 m east and 0.1 m up while localizing it: in its frame
+        // the centre is 0.1 m east, 0.4 m south and 0.1 m low of where the rock appeared.
+        biased.report.estimator_error_at_localization_m = Some([0.2, 0.0, 0.1]);
+        targets.insert(1, biased);
         targets.insert(2, target(distractor.centroid, TargetStatus::Mapped));
         targets.insert(3, target(rocks[1].centroid, TargetStatus::Unconverged));
         targets.insert(
@@ -89,6 +100,15 @@ mod tests {
         ground_truth_summary(&world, &mut targets, &mut report);
         assert_eq!(targets[&1].report.gt_rock_id, Some(rocks[0].id));
         assert!((targets[&1].report.localization_error_m.unwrap() - 0.5).abs() < 1e-9);
+        let in_estimate_frame = targets[&1]
+            .report
+            .localization_error_estimate_frame_m
+            .unwrap();
+        assert!(
+            (in_estimate_frame - 0.18f64.sqrt()).abs() < 1e-9,
+            "{in_estimate_frame}"
+        );
+        assert_eq!(targets[&3].report.localization_error_estimate_frame_m, None);
         assert_eq!(targets[&2].report.gt_role.as_deref(), Some("distractor"));
         assert_eq!(targets[&4].report.gt_rock_id, None);
         assert_eq!(report.distractors_mapped, 1);

@@ -157,8 +157,8 @@ pub fn center_in_box(
     Some(Point3::new(center_xy.x, center_xy.y, median_of(&|p| p.z)))
 }
 
-/// Wall time of each perception stage for one frame, seconds.
-#[derive(Debug, Clone, Copy, Default)]
+/// Wall time of each perception stage for one frame, seconds, and the targets it localized.
+#[derive(Debug, Clone, Default)]
 pub struct StageTimes {
     /// Detection.
     pub detect_s: f64,
@@ -166,6 +166,8 @@ pub struct StageTimes {
     pub track_s: f64,
     /// Depth filter.
     pub localize_s: f64,
+    /// Targets whose points this frame updated (it localized them).
+    pub updated: Vec<u32>,
 }
 
 /// Detector, box tracker and depth filter.
@@ -237,6 +239,7 @@ impl Perception {
             detect_s,
             track_s,
             localize_s: clock.elapsed().as_secs_f64(),
+            updated: observed.updated,
         })
     }
 

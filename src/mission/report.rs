@@ -66,6 +66,14 @@ pub struct TargetReport {
     pub gt_role: Option<String>,
     /// Distance from C_e to the true rock's centroid, metres.
     pub localization_error_m: Option<f64>,
+    /// The state estimator's mean position error (estimate − truth, ENU metres) over the
+    /// frames that updated this target's localization (ground truth).
+    #[serde(default)]
+    pub estimator_error_at_localization_m: Option<[f64; 3]>,
+    /// Distance from C_e to the true centroid moved by that mean error: the localization error
+    /// in the frame the vehicle flies in, metres.
+    #[serde(default)]
+    pub localization_error_estimate_frame_m: Option<f64>,
     /// F-score at τ = 1 cm against the visible ground truth.
     pub fscore_1cm: Option<f64>,
     /// F-score at τ = 2 cm against the visible ground truth.

@@ -133,6 +133,9 @@ pub struct Mission<'a> {
     last_depth: Option<(scarp_slam::image::DepthImage, Isometry3<f64>)>,
     /// Frames tried so far to see the target being mapped before its first mapped frame.
     recenter_attempts: usize,
+    /// Per perception target: the sum of the estimator's position error (estimate − truth) over
+    /// the frames that updated its localization, and their count (ground-truth bookkeeping).
+    estimator_error_by_target: std::collections::HashMap<u32, (Vector3<f64>, usize)>,
 }
 
 impl<'a> Mission<'a> {
@@ -215,6 +218,7 @@ impl<'a> Mission<'a> {
             ),
             last_depth: None,
             recenter_attempts: 0,
+            estimator_error_by_target: std::collections::HashMap::new(),
             inputs,
         })
     }
@@ -341,7 +345,7 @@ impl<'a> Mission<'a> {
         match self.mode {
             Mode::Search => {
                 self.report.frames_search += 1;
-                self.perceive(&frame, &estimate, timings)?;
+                self.perceive(&frame, &estimate, &truth, timings)?;
                 self.advance_search_progress();
                 if let Some(id) = self.next_target_to_localize() {
                     self.start_fine_localization(id, timings)?;
@@ -355,7 +359,7 @@ impl<'a> Mission<'a> {
             }
             Mode::FineLocalize(id) => {
                 self.report.frames_fine_localize += 1;
-                self.perceive(&frame, &estimate, timings)?;
+                self.perceive(&frame, &estimate, &truth, timings)?;
                 self.last_depth = Some((frame.depth_m.clone(), estimate));
                 match self.perception.target_state(id) {
                     None => {
@@ -451,12 +455,22 @@ impl<'a> Mission<'a> {
         &mut self,
         frame: &RgbdFrame,
         estimate: &Isometry3<f64>,
+        truth: &Isometry3<f64>,
         timings: &mut StageTimings,
     ) -> anyhow::Result<()> {
         let stage = self.perception.process(frame, &self.camera, estimate)?;
         timings.detect_s += stage.detect_s;
         timings.track_s += stage.track_s;
         timings.localize_s += stage.localize_s;
+        let error = estimate.translation.vector - truth.translation.vector;
+        for id in &stage.updated {
+            let entry = self
+                .estimator_error_by_target
+                .entry(*id)
+                .or_insert((Vector3::zeros(), 0));
+            entry.0 += error;
+            entry.1 += 1;
+        }
         let t = frame.timestamp_s;
         let states = self.perception.target_states();
         for state in &states {
@@ -848,6 +862,13 @@ impl<'a> Mission<'a> {
             self.set_status(id, TargetStatus::Incomplete);
         }
         let clock = Instant::now();
+        for (id, target) in self.targets.iter_mut() {
+            if let Some((sum, n)) = self.estimator_error_by_target.get(id)
+                && *n > 0
+            {
+                target.report.estimator_error_at_localization_m = Some((sum / *n as f64).into());
+            }
+        }
         super::evaluation::ground_truth_summary(
             self.inputs.world,
             &mut self.targets,
