@@ -31,12 +31,19 @@
 //!    from signed tetrahedra at uniform density.
 //! 4. The contact polygon is the convex hull of the rock's section at the contact (plus vertices
 //!    within [`FragilityConfig::contact_band_m`] above it), clipped by the convex hull of
-//!    whatever supports it from below (the pedestal's top or the mesh's own section just below).
+//!    whatever supports it from below (the pedestal's top or the mesh's own section just below),
+//!    then grown by every point of the base over that support that the rock would land on before
+//!    toppling ([`rocking::landing_hull`]): a base hanging millimetres above its pedestal beyond
+//!    the touching part is pivoted on, not toppled past.
 //! 5. α(θ) = atan(r(θ)/H) for [`FragilityConfig::azimuth_count`] azimuths, where r(θ) is the
 //!    horizontal distance from the centre of mass to the supporting line of the contact polygon
 //!    in direction θ and H the height of the centre of mass above the contact. α_min is the
 //!    exact minimum over all directions (the centre of mass's distance to the nearest hull
 //!    edge), so it is never above the smallest sampled α.
+//! 6. A 95% interval, `alpha_min_low_deg` to `alpha_min_high_deg` ([`AlphaInterval`]): for a
+//!    closed rock, the perturbation study's range; for a scan ([`scan::analyze_scan`]), the span
+//!    of 36 readings of the extrapolated contact, widened by the perturbation spread and by
+//!    margins set on a campaign of simulated flights.
 //!
 //! ```
 //! use nalgebra::Point3;
