@@ -150,9 +150,8 @@ pub fn summary(report: &FragilityReport) -> String {
 /// [`FragilityError`]: crate::fragility::FragilityError
 pub fn run(args: FragilityArgs) -> anyhow::Result<()> {
     let config = load_config(&args)?;
-    let mut mesh = read_mesh(&args.mesh)?;
-    let mut closed_scan = None;
-    if args.scan {
+    let mesh = read_mesh(&args.mesh)?;
+    let closed_scan = if args.scan {
         let closed = close_scan(&mesh, &config.scan)
             .with_context(|| format!("closing the scan {}", args.mesh.display()))?;
         tracing::info!(
@@ -161,21 +160,19 @@ pub fn run(args: FragilityArgs) -> anyhow::Result<()> {
             loops = closed.loops_closed,
             "scan cut above its support and closed"
         );
-        mesh = closed.mesh.clone();
-        closed_scan = Some(closed);
-    }
-    let pedestal = args.pedestal.as_deref().map(read_mesh).transpose()?;
-    let contact = match (&pedestal, args.contact_height) {
-        (Some(p), _) => Some(ContactSpec::Pedestal(p)),
-        (None, Some(h)) => Some(ContactSpec::Height(h)),
-        (None, None) => closed_scan.is_none().then_some(ContactSpec::Auto),
+        Some(closed)
+    } else {
+        None
     };
-    tracing::info!(mesh = %args.mesh.display(), faces = mesh.faces.len(), "fragility analysis");
+    let rock = closed_scan.as_ref().map_or(&mesh, |closed| &closed.mesh);
+    let pedestal = args.pedestal.as_deref().map(read_mesh).transpose()?;
+    tracing::info!(mesh = %args.mesh.display(), faces = rock.faces.len(), "fragility analysis");
     // A scan without a given contact gets the extrapolated contact and its interval.
-    let analysis = match (contact, &closed_scan) {
-        (Some(contact), _) => analyze_detailed(&mesh, contact, &config),
-        (None, Some(closed)) => analyze_closed_scan(closed, &config),
-        (None, None) => analyze_detailed(&mesh, ContactSpec::Auto, &config),
+    let analysis = match (&pedestal, args.contact_height, &closed_scan) {
+        (Some(p), _, _) => analyze_detailed(rock, ContactSpec::Pedestal(p), &config),
+        (None, Some(h), _) => analyze_detailed(rock, ContactSpec::Height(h), &config),
+        (None, None, Some(closed)) => analyze_closed_scan(closed, &config),
+        (None, None, None) => analyze_detailed(rock, ContactSpec::Auto, &config),
     }
     .with_context(|| format!("analysing {}", args.mesh.display()))?;
     if let Some(path) = &args.figure {

@@ -109,6 +109,13 @@ pub struct MinimumSupport {
     pub azimuth_deg: f64,
 }
 
+/// Whether `p` lies inside or on the convex counter-clockwise `polygon` (false for fewer than
+/// three points).
+fn contains(polygon: &[Point2<f64>], p: &Point2<f64>) -> bool {
+    let n = polygon.len();
+    n >= 3 && (0..n).all(|k| orient(&polygon[k], &polygon[(k + 1) % n], p) >= 0.0)
+}
+
 /// Closest point to `p` on segment `a`–`b`.
 fn closest_on_segment(a: &Point2<f64>, b: &Point2<f64>, p: &Point2<f64>) -> Point2<f64> {
     let d = b - a;
@@ -133,8 +140,7 @@ pub fn minimum_support(hull: &[Point2<f64>], com: &Point2<f64>) -> Option<Minimu
     if n == 0 {
         return None;
     }
-    let inside = n >= 3 && (0..n).all(|k| orient(&hull[k], &hull[(k + 1) % n], com) >= 0.0);
-    if inside {
+    if contains(hull, com) {
         let (distance_m, normal) = (0..n)
             .map(|k| {
                 let (a, b) = (hull[k], hull[(k + 1) % n]);
@@ -200,31 +206,32 @@ pub fn landing_hull(
     if hull.len() < 3 || com_height <= 0.0 {
         return hull.to_vec();
     }
-    let inside = |polygon: &[Point2<f64>], p: &Point2<f64>| {
-        let n = polygon.len();
-        (0..n).all(|k| orient(&polygon[k], &polygon[(k + 1) % n], p) >= 0.0)
-    };
     let mut candidates: Vec<Point3<f64>> = underside
         .iter()
-        .filter(|p| p.z >= plane_z && (support.len() < 3 || inside(support, &p.xy())))
+        .filter(|p| p.z >= plane_z && (support.len() < 3 || contains(support, &p.xy())))
         .copied()
         .collect();
     let mut hull = hull.to_vec();
     // Each pass adds at least one point or stops; a bound keeps a pathological mesh finite.
     for _ in 0..64 {
-        candidates.retain(|p| !inside(&hull, &p.xy()));
+        candidates.retain(|p| !contains(&hull, &p.xy()));
+        // Per edge: a point on it, its outward normal, and the centre of mass's distance inside.
         let n = hull.len();
+        let edges: Vec<(Point2<f64>, Vector2<f64>, f64)> = (0..n)
+            .map(|k| {
+                let (a, b) = (hull[k], hull[(k + 1) % n]);
+                let e = (b - a).normalize();
+                let outward = Vector2::new(e.y, -e.x);
+                (a, outward, (a - com.xy()).dot(&outward))
+            })
+            .collect();
         let landed: Vec<Point2<f64>> = candidates
             .iter()
             .filter(|p| {
-                (0..n).any(|k| {
-                    let (a, b) = (hull[k], hull[(k + 1) % n]);
-                    let e = (b - a).normalize();
-                    let outward = Vector2::new(e.y, -e.x);
-                    let beyond = (p.xy() - a).dot(&outward);
-                    let com_inside = (a - com.xy()).dot(&outward);
+                edges.iter().any(|(a, outward, com_inside)| {
+                    let beyond = (p.xy() - a).dot(outward);
                     beyond > 0.0
-                        && com_inside > 0.0
+                        && *com_inside > 0.0
                         && (p.z - plane_z) * com_height < beyond * com_inside
                 })
             })
@@ -255,30 +262,6 @@ pub fn purvance_p(mass_kg: f64, g_m_s2: f64, radius_m: f64, inertia_about_axis_k
 mod tests {
     use super::*;
 
-    #[test]
-    fn a_base_hanging_just_above_the_support_is_landed_on() {
-        let com = Point3::new(0.0, 0.0, 0.5);
-        // 2 mm up and 0.2 m beyond the east edge: tipping east lands on it after 0.6°, long
-        // before the 11.3° that topples the rock about the edge.
-        let low = Point3::new(0.3, 0.0, 0.002);
-        // 0.2 m up: the rock topples before it comes down.
-        let high = Point3::new(-0.3, 0.0, 0.2);
-        // A square contact 0.2 m wide under a centre of mass 0.5 m up.
-        let hull = landing_hull(&square(0.1), &[low, high], &[], 0.0, &com);
-        let east = minimum_support(&hull, &com.xy()).unwrap();
-        assert!((polygon_area(&hull) - (0.2 * 0.2 + 0.5 * 0.2 * 0.2)).abs() < 1e-12);
-        assert!(
-            (east.distance_m - 0.1).abs() < 1e-12,
-            "west and north still bind"
-        );
-        assert!(hull.iter().any(|p| (p.x - 0.3).abs() < 1e-12));
-        assert!(hull.iter().all(|p| p.x > -0.11));
-        // A support that ends at 0.2 m east leaves nothing there to land on.
-        assert_eq!(
-            landing_hull(&square(0.1), &[low, high], &square(0.2), 0.0, &com),
-            square(0.1)
-        );
-    }
     use proptest::prelude::*;
 
     fn square(b: f64) -> Vec<Point2<f64>> {
@@ -381,5 +364,30 @@ mod tests {
                 prop_assert!((at - m.distance_m).abs() < 1e-9);
             }
         }
+    }
+
+    #[test]
+    fn a_base_hanging_just_above_the_support_is_landed_on() {
+        let com = Point3::new(0.0, 0.0, 0.5);
+        // 2 mm up and 0.2 m beyond the east edge: tipping east lands on it after 0.6°, long
+        // before the 11.3° that topples the rock about the edge.
+        let low = Point3::new(0.3, 0.0, 0.002);
+        // 0.2 m up: the rock topples before it comes down.
+        let high = Point3::new(-0.3, 0.0, 0.2);
+        // A square contact 0.2 m wide under a centre of mass 0.5 m up.
+        let hull = landing_hull(&square(0.1), &[low, high], &[], 0.0, &com);
+        let east = minimum_support(&hull, &com.xy()).unwrap();
+        assert!((polygon_area(&hull) - (0.2 * 0.2 + 0.5 * 0.2 * 0.2)).abs() < 1e-12);
+        assert!(
+            (east.distance_m - 0.1).abs() < 1e-12,
+            "west and north still bind"
+        );
+        assert!(hull.iter().any(|p| (p.x - 0.3).abs() < 1e-12));
+        assert!(hull.iter().all(|p| p.x > -0.11));
+        // A support that ends at 0.2 m east leaves nothing there to land on.
+        assert_eq!(
+            landing_hull(&square(0.1), &[low, high], &square(0.2), 0.0, &com),
+            square(0.1)
+        );
     }
 }

@@ -27,10 +27,9 @@ use std::collections::HashMap;
 use nalgebra::{Point2, Point3};
 use scarp_slam::TriangleMesh;
 use scarp_slam::geometry::{convex_hull_2d, polygon_centroid, polygon_signed_area};
-
-use super::rocking::clip_convex;
 use serde::{Deserialize, Serialize};
 
+use super::rocking::clip_convex;
 use super::topology::weld_key;
 use super::{ContactSpec, FragilityAnalysis, FragilityConfig, FragilityError, analyze_detailed};
 
@@ -368,18 +367,24 @@ fn support_outline(
     let measured: Vec<Point2<f64>> = highest
         .iter()
         .enumerate()
-        .filter_map(|(s, h)| {
-            h.map(|(_, r)| {
-                let azimuth = (s as f64 + 0.5) / sectors as f64 * std::f64::consts::TAU;
-                axis_xy + r * nalgebra::Vector2::new(azimuth.cos(), azimuth.sin())
-            })
-        })
+        .filter_map(|(s, h)| h.map(|(_, r)| sector_point(axis_xy, s, sectors, r)))
         .collect();
     if (measured.len() as f64) < config.profile_min_near_fraction * sectors as f64 {
         return None;
     }
     let hull = convex_hull_2d(&measured);
     (hull.len() >= 3 && polygon_signed_area(&hull) > 0.0).then_some(hull)
+}
+
+/// The point `radius_m` from `axis_xy` along the middle of sector `sector` of `sectors`.
+fn sector_point(
+    axis_xy: &Point2<f64>,
+    sector: usize,
+    sectors: usize,
+    radius_m: f64,
+) -> Point2<f64> {
+    let azimuth = (sector as f64 + 0.5) / sectors as f64 * std::f64::consts::TAU;
+    axis_xy + radius_m * nalgebra::Vector2::new(azimuth.cos(), azimuth.sin())
 }
 
 /// `hull` clipped by `outline` where they overlap, else `hull` itself.
@@ -570,8 +575,7 @@ impl BasalProfile {
                 ProfileModel::SquaredRadius => at_plane.sqrt(),
                 ProfileModel::Radius => at_plane,
             };
-            let azimuth = (s as f64 + 0.5) / sectors as f64 * std::f64::consts::TAU;
-            contact.push(self.axis_xy + r0 * nalgebra::Vector2::new(azimuth.cos(), azimuth.sin()));
+            contact.push(sector_point(&self.axis_xy, s, sectors, r0));
         }
         let hull = convex_hull_2d(&contact);
         if hull.len() < 3 || polygon_signed_area(&hull).abs() <= 0.0 {
@@ -717,17 +721,6 @@ fn manifold_faces(faces: &[[u32; 3]]) -> Vec<[u32; 3]> {
         .collect()
 }
 
-/// Total area of `mesh`'s faces, m².
-fn surface_area(mesh: &TriangleMesh) -> f64 {
-    mesh.faces
-        .iter()
-        .map(|f| {
-            let [a, b, c] = f.map(|v| mesh.positions[v as usize].cast::<f64>());
-            0.5 * (b - a).cross(&(c - a)).norm()
-        })
-        .sum()
-}
-
 /// Closes every boundary loop of `mesh` with a fan around the loop's centroid. Returns the
 /// number of loops closed.
 fn fill_holes(mesh: &mut TriangleMesh) -> usize {
@@ -869,9 +862,9 @@ pub fn close_scan(mesh: &TriangleMesh, config: &ScanConfig) -> Result<ClosedScan
     .iter()
     .map(|p| [p.x, p.y, contact_height_m])
     .collect();
-    let scanned_area_m2 = surface_area(&rock);
+    let scanned_area_m2 = rock.surface_area();
     let loops_closed = fill_holes(&mut rock);
-    let filled_area_m2 = surface_area(&rock) - scanned_area_m2;
+    let filled_area_m2 = rock.surface_area() - scanned_area_m2;
     let filled_fraction = filled_area_m2 / (filled_area_m2 + scanned_area_m2);
     if filled_fraction > config.max_filled_fraction {
         return Err(FragilityError::Degenerate(format!(
@@ -948,7 +941,7 @@ pub fn analyze_closed_scan(
     closed: &ClosedScan,
     config: &FragilityConfig,
 ) -> Result<FragilityAnalysis, FragilityError> {
-    let analyse = |polygon: &[[f64; 3]]| {
+    let analyse = |polygon: &[[f64; 3]], config: &FragilityConfig| {
         analyze_detailed(&closed.mesh, ContactSpec::Polygon(polygon), config).map_err(|e| {
             match e {
                 // The scanned rock does stand: its extrapolated contact is what is wrong.
@@ -965,7 +958,10 @@ pub fn analyze_closed_scan(
             }
         })
     };
-    let first = analyse(&closed.contact_polygon)?;
+    // The first analysis only places the centre of mass for the readings: no perturbation study.
+    let mut unperturbed = config.clone();
+    unperturbed.uncertainty.samples = 0;
+    let first = analyse(&closed.contact_polygon, &unperturbed)?;
     let hypotheses = ContactHypothesis::ensemble(1.96 * config.uncertainty.contact_height_sigma_m);
     // (α_min, polygon) of each reading; the centre of mass hardly moves with the plane's
     // millimetres, so the first analysis's serves them all.
@@ -976,10 +972,10 @@ pub fn analyze_closed_scan(
         .collect();
     // A stable sort, so ties keep the ensemble's order and the choice is deterministic.
     readings.sort_by(|a, b| a.0.total_cmp(&b.0));
-    let mut analysis = match readings.get(readings.len().saturating_sub(1) / 2) {
-        Some((_, median)) if *median != closed.contact_polygon => analyse(median)?,
-        _ => first,
-    };
+    let median = readings
+        .get(readings.len().saturating_sub(1) / 2)
+        .map_or(&closed.contact_polygon, |(_, polygon)| polygon);
+    let mut analysis = analyse(median, config)?;
     let alphas: Vec<f64> = readings.iter().map(|(a, _)| *a).collect();
     analysis.widen_interval(
         &alphas,

@@ -25,8 +25,7 @@ pub fn nearest_rock<'w>(world: &'w World, center: &Point3<f64>) -> Option<(&'w R
 
 /// Fills each target's `gt_rock_id`, `gt_role`, `localization_error_m` and (where the
 /// estimator's error at its localization is known) `localization_error_estimate_frame_m`, and
-/// the report's
-/// `distractors_mapped` and `targets_missed`.
+/// the report's `distractors_mapped` and `targets_missed`.
 pub fn ground_truth_summary(world: &World, targets: &mut Catalog, report: &mut MissionReport) {
     for m in targets.values_mut() {
         let center = Point3::from(m.report.center);

@@ -157,9 +157,10 @@ pub fn center_in_box(
     Some(Point3::new(center_xy.x, center_xy.y, median_of(&|p| p.z)))
 }
 
-/// Wall time of each perception stage for one frame, seconds, and the targets it localized.
+/// What perception did with one frame: the wall time of each stage, seconds, and the targets it
+/// localized.
 #[derive(Debug, Clone, Default)]
-pub struct StageTimes {
+pub struct PerceptionStep {
     /// Detection.
     pub detect_s: f64,
     /// Box tracking.
@@ -203,7 +204,7 @@ impl Perception {
         frame: &RgbdFrame,
         camera: &PinholeCamera,
         world_from_camera: &Isometry3<f64>,
-    ) -> anyhow::Result<StageTimes> {
+    ) -> anyhow::Result<PerceptionStep> {
         let clock = Instant::now();
         let detections = self.detector.detect(frame)?;
         let detect_s = clock.elapsed().as_secs_f64();
@@ -235,7 +236,7 @@ impl Perception {
             boxes.len(),
             observed
         );
-        Ok(StageTimes {
+        Ok(PerceptionStep {
             detect_s,
             track_s,
             localize_s: clock.elapsed().as_secs_f64(),

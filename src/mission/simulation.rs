@@ -863,9 +863,8 @@ impl<'a> Mission<'a> {
         }
         let clock = Instant::now();
         for (id, target) in self.targets.iter_mut() {
-            if let Some((sum, n)) = self.estimator_error_by_target.get(id)
-                && *n > 0
-            {
+            // Entries exist only for targets updated at least once: the count is never zero.
+            if let Some((sum, n)) = self.estimator_error_by_target.get(id) {
                 target.report.estimator_error_at_localization_m = Some((sum / *n as f64).into());
             }
         }
