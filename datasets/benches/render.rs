@@ -5,6 +5,7 @@
 use criterion::{Criterion, criterion_group, criterion_main};
 use scarp_datasets::paths;
 use scarp_datasets::render::Renderer;
+use scarp_datasets::sensor::SensorConfig;
 use scarp_datasets::world::World;
 use scarp_slam::PinholeCamera;
 
@@ -29,5 +30,32 @@ fn bench_render(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, bench_render);
+/// The sensor model applied to every simulated frame: stereo depth noise with dropouts, and RGB
+/// noise, on a rendered 640×480 view of the first target.
+fn bench_sensor(c: &mut Criterion) {
+    let world = World::builtin_default().expect("default world");
+    let camera = PinholeCamera::from_hfov(640, 480, 80.0).expect("camera");
+    let orbit = paths::default_orbit(&world, 8).expect("path");
+    let frame = Renderer::new(&world)
+        .render(&camera, &orbit[0].world_from_camera)
+        .expect("render");
+    let sensor = SensorConfig::default();
+    let mut group = c.benchmark_group("sensor_640x480");
+    let mut seed = 0;
+    group.bench_function("corrupt_depth", |b| {
+        b.iter(|| {
+            seed += 1;
+            sensor.corrupt_depth(&frame.depth_m, camera.fx, seed)
+        })
+    });
+    group.bench_function("corrupt_rgb", |b| {
+        b.iter(|| {
+            seed += 1;
+            sensor.corrupt_rgb(&frame.rgb, seed)
+        })
+    });
+    group.finish();
+}
+
+criterion_group!(benches, bench_render, bench_sensor);
 criterion_main!(benches);

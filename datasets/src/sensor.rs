@@ -1,13 +1,11 @@
 //! Sensor models: stereo depth noise, range limits, dropouts at depth edges, and RGB noise.
 
-use rand::rngs::Xoshiro256PlusPlus;
-use rand::{RngExt, SeedableRng};
-use rand_distr::{Distribution, Normal};
 use rayon::prelude::*;
 use scarp_slam::image::{DepthImage, RgbImage};
+use scarp_slam::stats::standard_normal_quantile;
 use serde::{Deserialize, Serialize};
 
-use crate::noise::derive_seed;
+use crate::noise::mix64;
 
 /// A stereo depth camera and an RGB camera's noise. Depth noise follows the stereo model:
 /// disparity d = f·b/z gets Gaussian noise of σ_d pixels, so σ_z ≈ z²·σ_d/(f·b).
@@ -54,22 +52,27 @@ impl SensorConfig {
     }
 
     /// Applies range limits, edge and random dropouts and stereo noise to a clean depth image.
-    /// Rows draw from their own seeded streams, so the result does not depend on the thread
-    /// count.
+    /// Each pixel draws from its own counter-based stream ([`pixel_bits`]), so the result does
+    /// not depend on the thread count, and a pixel's noise does not depend on the others.
     pub fn corrupt_depth(&self, depth_m: &DepthImage, focal_px: f64, seed: u64) -> DepthImage {
         let (w, h) = (depth_m.width() as usize, depth_m.height() as usize);
         let src = depth_m.as_slice();
         let fb = focal_px * self.baseline_m;
-        let normal = Normal::new(0.0, self.disparity_sigma_px.max(0.0)).ok();
+        let sigma_px = self.disparity_sigma_px.max(0.0);
+        let edge_threshold = probability_threshold(self.edge_dropout_probability);
+        let random_threshold = probability_threshold(self.random_dropout_probability);
         let mut out = src.to_vec();
         out.par_chunks_mut(w).enumerate().for_each(|(v, row)| {
-            let mut rng = Xoshiro256PlusPlus::seed_from_u64(derive_seed(seed, v as u64));
             for (u, value) in row.iter_mut().enumerate() {
                 let z = f64::from(src[v * w + u]);
-                // Draw every random number for every pixel so streams stay aligned.
-                let (edge_draw, random_draw) = (rng.random::<f64>(), rng.random::<f64>());
-                let disparity_noise = normal.map_or(0.0, |n| n.sample(&mut rng));
                 if !(z >= self.min_depth_m && z <= self.max_depth_m) {
+                    *value = 0.0;
+                    continue;
+                }
+                let bits = pixel_bits(seed, (v * w + u) as u64);
+                // Bits 48–63 decide an edge dropout, 32–47 a random one, 0–31 the noise.
+                let (edge_draw, random_draw) = ((bits >> 48) as u32, (bits >> 32) as u32 & 0xffff);
+                if random_draw < random_threshold {
                     *value = 0.0;
                     continue;
                 }
@@ -79,18 +82,19 @@ impl SensorConfig {
                     (u, v.wrapping_sub(1)),
                     (u, v + 1),
                 ];
-                let on_edge = neighbours.iter().any(|&(nu, nv)| {
-                    nu < w && nv < h && {
-                        let n = f64::from(src[nv * w + nu]);
-                        n <= 0.0 || (n - z).abs() > self.edge_jump_ratio * z
-                    }
-                });
-                if (on_edge && edge_draw < self.edge_dropout_probability)
-                    || random_draw < self.random_dropout_probability
-                {
+                let on_edge = || {
+                    neighbours.iter().any(|&(nu, nv)| {
+                        nu < w && nv < h && {
+                            let n = f64::from(src[nv * w + nu]);
+                            n <= 0.0 || (n - z).abs() > self.edge_jump_ratio * z
+                        }
+                    })
+                };
+                if edge_draw < edge_threshold && on_edge() {
                     *value = 0.0;
                     continue;
                 }
+                let disparity_noise = sigma_px * standard_normal_from_bits(bits as u32);
                 let disparity = fb / z + disparity_noise;
                 *value = if disparity > 0.0 {
                     (fb / disparity) as f32
@@ -103,27 +107,74 @@ impl SensorConfig {
         DepthImage::from_vec(w as u32, h as u32, out).expect("same size as input")
     }
 
-    /// Adds Gaussian noise to every channel of an RGB image, per-row seeded.
+    /// Adds Gaussian noise of σ = `rgb_sigma` to every channel of an RGB image, rounded to whole
+    /// levels and clamped to [0, 255], with per-pixel counter-based streams.
+    ///
+    /// Because a channel's value c is an integer, round(c + n) = c + round(n): the noise is
+    /// drawn directly as the integer round(n), from a table of its quantiles at 2⁻¹⁶ steps.
     pub fn corrupt_rgb(&self, rgb: &RgbImage, seed: u64) -> RgbImage {
         let w = rgb.width() as usize;
-        let Ok(normal) = Normal::new(0.0f32, self.rgb_sigma.max(0.0) as f32) else {
+        if !(self.rgb_sigma > 0.0) {
             return rgb.clone();
-        };
+        }
+        let offsets = rounded_normal_table(self.rgb_sigma);
+        let seed = seed ^ 0x0067_7262;
         let mut out = rgb.as_slice().to_vec();
         out.par_chunks_mut(w).enumerate().for_each(|(v, row)| {
-            let mut rng =
-                Xoshiro256PlusPlus::seed_from_u64(derive_seed(seed ^ 0x0067_7262, v as u64));
-            for pixel in row {
-                *pixel = pixel.map(|c| {
-                    (f32::from(c) + normal.sample(&mut rng))
-                        .round()
-                        .clamp(0.0, 255.0) as u8
-                });
+            for (u, pixel) in row.iter_mut().enumerate() {
+                let bits = pixel_bits(seed, (v * w + u) as u64);
+                for (k, channel) in pixel.iter_mut().enumerate() {
+                    let offset = offsets[(bits >> (16 * k)) as usize & 0xffff];
+                    *channel = (i32::from(*channel) + offset).clamp(0, 255) as u8;
+                }
             }
         });
         // The buffer keeps the input's size.
         RgbImage::from_vec(rgb.width(), rgb.height(), out).expect("same size as input")
     }
+}
+
+/// 64 random bits for pixel `index` of the stream `seed`: a counter-based generator (a hash of
+/// the seed and the index), so a pixel's draw needs no state and no order.
+fn pixel_bits(seed: u64, index: u64) -> u64 {
+    mix64(seed ^ mix64(index.wrapping_add(0x9e37_79b9_7f4a_7c15)))
+}
+
+/// The 16-bit threshold below which a uniform 16-bit draw happens with probability `p`.
+fn probability_threshold(p: f64) -> u32 {
+    (p.clamp(0.0, 1.0) * 65536.0).round() as u32
+}
+
+/// A standard normal draw from 32 uniform bits: the quantile at the bits' cell midpoint, so
+/// |z| reaches 6.2 in the tails.
+fn standard_normal_from_bits(bits: u32) -> f64 {
+    standard_normal_quantile((f64::from(bits) + 0.5) / 4_294_967_296.0)
+}
+
+/// round(σ·Φ⁻¹(p)) at p = (i + ½)/2¹⁶ for every 16-bit i: a uniform 16-bit index gives a
+/// rounded normal draw. Built from the half-integer boundaries' quantiles (a few hundred
+/// evaluations), not one evaluation per entry.
+fn rounded_normal_table(sigma: f64) -> Vec<i32> {
+    const N: usize = 1 << 16;
+    let draw = |i: usize| sigma * standard_normal_quantile((i as f64 + 0.5) / N as f64);
+    let mut table = Vec::with_capacity(N);
+    let mut i = 0;
+    while i < N {
+        let value = draw(i).round();
+        // The first index whose draw rounds above `value`: draws increase with i.
+        let (mut lo, mut hi) = (i, N);
+        while hi - lo > 1 {
+            let mid = (lo + hi) / 2;
+            if draw(mid).round() > value {
+                hi = mid;
+            } else {
+                lo = mid;
+            }
+        }
+        table.resize(hi, value as i32);
+        i = hi;
+    }
+    table
 }
 
 #[cfg(test)]
@@ -161,6 +212,50 @@ mod tests {
                 "z={z}: mean {mean}"
             );
         }
+    }
+
+    #[test]
+    fn rgb_noise_has_the_configured_sigma_and_clamps() {
+        let config = SensorConfig {
+            rgb_sigma: 3.0,
+            ..Default::default()
+        };
+        let grey = RgbImage::filled(200, 200, [100, 0, 255]);
+        let noisy = config.corrupt_rgb(&grey, 7);
+        let offsets: Vec<f64> = noisy
+            .as_slice()
+            .iter()
+            .map(|p| f64::from(p[0]) - 100.0)
+            .collect();
+        let n = offsets.len() as f64;
+        let mean = offsets.iter().sum::<f64>() / n;
+        let variance = offsets.iter().map(|d| (d - mean).powi(2)).sum::<f64>() / (n - 1.0);
+        // Rounding to whole levels adds 1/12 to the variance (Sheppard).
+        let expected = (9.0f64 + 1.0 / 12.0).sqrt();
+        assert!(mean.abs() < 0.05, "mean {mean}");
+        assert!(
+            (variance.sqrt() / expected - 1.0).abs() < 0.02,
+            "σ {}",
+            variance.sqrt()
+        );
+        // Channels at the ends of the range clamp, and half of their draws go past it.
+        let at_zero = noisy.as_slice().iter().filter(|p| p[1] == 0).count() as f64 / n;
+        let at_top = noisy.as_slice().iter().filter(|p| p[2] == 255).count() as f64 / n;
+        assert!((at_zero - 0.566).abs() < 0.02, "{at_zero}");
+        assert!((at_top - 0.566).abs() < 0.02, "{at_top}");
+        assert_eq!(noisy, config.corrupt_rgb(&grey, 7));
+        assert_ne!(noisy, config.corrupt_rgb(&grey, 8));
+    }
+
+    #[test]
+    fn the_rounded_normal_table_holds_each_integer_with_its_probability() {
+        let table = rounded_normal_table(2.0);
+        assert_eq!(table.len(), 1 << 16);
+        assert!(table.windows(2).all(|w| w[0] <= w[1]));
+        // P(round(N(0, 2)) = 0) = P(|N(0, 1)| < 0.25) = 0.19741.
+        let zero = table.iter().filter(|&&k| k == 0).count() as f64 / 65536.0;
+        assert!((zero - 0.19741).abs() < 1e-4, "{zero}");
+        assert_eq!(table[0], -table[65535]);
     }
 
     #[test]

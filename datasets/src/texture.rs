@@ -120,12 +120,23 @@ impl AlbedoMap {
             (gy as usize).min(self.ny - 2),
         );
         let (fx, fy) = ((gx - i as f64) as f32, (gy - j as f64) as f32);
-        let t = |di: usize, dj: usize| self.texels[(j + dj) * self.nx + i + di];
-        let (a, b, c, d) = (t(0, 0), t(1, 0), t(0, 1), t(1, 1));
-        [0, 1, 2].map(|k| {
-            let south = f32::from(a[k]) + (f32::from(b[k]) - f32::from(a[k])) * fx;
-            let north = f32::from(c[k]) + (f32::from(d[k]) - f32::from(c[k])) * fx;
-            south + (north - south) * fy
-        })
+        // Runs for every terrain pixel of every frame: two row slices (two bounds checks) and
+        // the four corner weights once, not per channel.
+        let south = &self.texels[j * self.nx + i..j * self.nx + i + 2];
+        let north = &self.texels[(j + 1) * self.nx + i..(j + 1) * self.nx + i + 2];
+        let weights = [
+            (1.0 - fx) * (1.0 - fy),
+            fx * (1.0 - fy),
+            (1.0 - fx) * fy,
+            fx * fy,
+        ];
+        let corners = [south[0], south[1], north[0], north[1]];
+        let mut out = [0.0f32; 3];
+        for (texel, weight) in corners.iter().zip(weights) {
+            for (o, &c) in out.iter_mut().zip(texel) {
+                *o += f32::from(c) * weight;
+            }
+        }
+        out
     }
 }

@@ -1,6 +1,6 @@
 //! Triangle setup (culling, near-plane clipping, projection) and tile rasterization.
 
-use nalgebra::{Point3, Vector3};
+use nalgebra::Point3;
 use scarp_slam::PinholeCamera;
 
 /// Side of a square screen tile, pixels.
@@ -17,13 +17,20 @@ pub struct SetupTriangle {
     pub bbox: [u32; 4],
     /// Index of the source layer.
     pub layer: u16,
-    /// The unclipped face's corners in camera coordinates, metres.
-    pub corners: [Point3<f64>; 3],
-    /// The face's unnormalised normal (b − a) × (c − a), camera frame.
-    pub normal: Vector3<f64>,
-    /// Light (ambient + diffuse, in [0, 1]) at each corner, interpolated across the face
-    /// (Gouraud shading); set by the caller after setup.
-    pub corner_light: [f32; 3],
+}
+
+/// A face clipped against the near plane: up to 4 corners (a triangle loses one corner and
+/// gains two), kept on the stack because setup runs for every visible face of every frame.
+struct ClippedPolygon {
+    corners: [Point3<f64>; 4],
+    len: usize,
+}
+
+impl ClippedPolygon {
+    fn push(&mut self, p: Point3<f64>) {
+        self.corners[self.len] = p;
+        self.len += 1;
+    }
 }
 
 /// Sets up one camera-space triangle: culls back faces (faces wound clockwise seen from the
@@ -41,9 +48,12 @@ pub fn setup_triangle(
         return;
     }
     let inside = corners.map(|p| p.z >= near_m);
-    let mut polygon: Vec<Point3<f64>> = Vec::with_capacity(4);
+    let mut polygon = ClippedPolygon {
+        corners: [Point3::origin(); 4],
+        len: 0,
+    };
     if inside.iter().all(|&i| i) {
-        polygon.extend_from_slice(corners);
+        corners.iter().for_each(|&p| polygon.push(p));
     } else if inside.iter().any(|&i| i) {
         for k in 0..3 {
             let (p, q) = (corners[k], corners[(k + 1) % 3]);
@@ -58,6 +68,7 @@ pub fn setup_triangle(
     } else {
         return;
     }
+    let polygon = &polygon.corners[..polygon.len];
     for k in 1..polygon.len() - 1 {
         let tri = [polygon[0], polygon[k], polygon[k + 1]];
         let mut screen = tri.map(|p| {
@@ -89,9 +100,6 @@ pub fn setup_triangle(
             inv_z,
             bbox: [u0 as u32, v0 as u32, u1 as u32, v1 as u32],
             layer,
-            corners: *corners,
-            normal,
-            corner_light: [1.0; 3],
         });
     }
 }
