@@ -113,8 +113,79 @@ fn small_world_mission_finds_maps_and_measures_its_target() {
     assert!(!geo["features"].as_array().unwrap().is_empty());
 }
 
+/// Runs `scarp simulate` on the small world with the small mission's settings plus `extra`
+/// TOML, and returns `mission.json` and stderr.
+fn simulate_small(extra: &str, flags: &[&str]) -> (serde_json::Value, String) {
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("mission.toml");
+    let base = std::fs::read_to_string(test_data("small_mission.toml")).unwrap();
+    std::fs::write(&config, format!("{base}\n{extra}")).unwrap();
+    let out_dir = dir.path().join("mission");
+    let mut args = vec![
+        "simulate",
+        "--world",
+        &test_data("small_world.toml"),
+        "--config",
+        config.to_str().unwrap(),
+        "--out",
+        out_dir.to_str().unwrap(),
+    ]
+    .into_iter()
+    .map(String::from)
+    .collect::<Vec<_>>();
+    args.extend(flags.iter().map(|f| f.to_string()));
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let out = scarp(&args);
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(out.status.success(), "{stderr}");
+    let json = serde_json::from_slice(&std::fs::read(out_dir.join("mission.json")).unwrap())
+        .unwrap_or_else(|e| panic!("mission.json: {e}\n{stderr}"));
+    (json, stderr)
+}
+
+/// The state estimate reads 1.5 m above the truth all flight long, so flying on it alone puts
+/// the base ring (planned 1.5 m above the ground) into the ground. The rangefinder senses the
+/// error and the monitor removes it: no collision, the true clearance stays ≥ 0.5 m, and the
+/// target is mapped. The same flight without the monitor collides (the test can fail).
+#[test]
+fn the_monitor_flies_out_a_vertical_estimator_bias() {
+    let bias = "[estimator]\nbias_m = [0.0, 0.0, 1.5]\n";
+    let unmonitored = std::thread::spawn(move || {
+        simulate_small(
+            &format!("{bias}[safety]\nmonitor = false\n"),
+            &["--allow-collisions"],
+        )
+    });
+    let (json, stderr) = simulate_small(bias, &[]);
+    assert_eq!(json["end_reason"], "complete", "{stderr}");
+    assert_eq!(json["collisions"], 0, "{:#}", json["safety_events"]);
+    let min = json["min_clearance_m"].as_f64().unwrap();
+    assert!(min >= 0.5, "true min clearance {min}");
+    let target = &json["targets"][0];
+    assert_eq!(target["status"], "mapped", "{target:#}");
+    assert!(target["fscore_2cm"].as_f64().unwrap() > 0.85, "{target:#}");
+
+    let (json, _) = unmonitored.join().unwrap();
+    assert!(json["collisions"].as_u64().unwrap() > 0, "{json:#}");
+    assert!(json["min_clearance_m"].as_f64().unwrap() < 0.5);
+}
+
+/// A collision ends the flight: `crashed`, with the event and a WARN line.
+#[test]
+fn a_collision_ends_the_flight() {
+    let (json, stderr) = simulate_small("collision_radius_m = 40.0\n", &[]);
+    assert_eq!(json["end_reason"], "crashed", "{stderr}");
+    assert!(stderr.contains("crashed"), "{stderr}");
+    assert_eq!(json["collisions"], 1);
+    let events = json["safety_events"].as_array().unwrap();
+    assert_eq!(events.len(), 1, "{events:#?}");
+    assert_eq!(events[0]["kind"], "collision");
+    assert!(json["sim_time_s"].as_f64().unwrap() < 1.0);
+}
+
 /// A vehicle whose collision radius reaches the ground from its search altitude collides on
-/// every step: one event, in search mode, against the terrain, with a WARN line.
+/// every step (`--allow-collisions` flies on): one event, in search mode, against the terrain,
+/// with a WARN line.
 #[test]
 fn a_collision_is_an_event_with_time_place_and_obstacle() {
     let dir = tempfile::tempdir().unwrap();
@@ -127,6 +198,7 @@ fn a_collision_is_an_event_with_time_place_and_obstacle() {
     let out_dir = dir.path().join("mission");
     let out = scarp(&[
         "simulate",
+        "--allow-collisions",
         "--world",
         &test_data("small_world.toml"),
         "--config",

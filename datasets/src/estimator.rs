@@ -48,6 +48,9 @@ pub struct EstimatorConfig {
     pub yaw_sigma_deg: f64,
     /// Correlation time of the attitude errors, seconds. Default 10.
     pub attitude_correlation_s: f64,
+    /// A constant position error added to the walk (estimate − truth), metres, world ENU:
+    /// a scripted bias for testing what flies on the estimate. Default zero.
+    pub bias_m: [f64; 3],
 }
 
 impl Default for EstimatorConfig {
@@ -70,6 +73,7 @@ struct EstimatorTable {
     roll_pitch_sigma_deg: Option<f64>,
     yaw_sigma_deg: Option<f64>,
     attitude_correlation_s: Option<f64>,
+    bias_m: Option<[f64; 3]>,
 }
 
 impl From<EstimatorTable> for EstimatorConfig {
@@ -89,6 +93,7 @@ impl From<EstimatorTable> for EstimatorConfig {
             attitude_correlation_s: t
                 .attitude_correlation_s
                 .unwrap_or(base.attitude_correlation_s),
+            bias_m: t.bias_m.unwrap_or(base.bias_m),
         }
     }
 }
@@ -106,6 +111,7 @@ impl EstimatorConfig {
             roll_pitch_sigma_deg: 0.5,
             yaw_sigma_deg: 2.0,
             attitude_correlation_s: 10.0,
+            bias_m: [0.0; 3],
         };
         match preset {
             EstimatorPreset::Gps => gps,
@@ -170,6 +176,7 @@ pub struct StateEstimator {
     /// x, y, z position walks, then roll, pitch, yaw.
     walks: [GaussMarkov; 6],
     white_m: [f64; 3],
+    bias_m: Vector3<f64>,
     previous_t: Option<f64>,
 }
 
@@ -200,18 +207,20 @@ impl StateEstimator {
                 cfg.horizontal_white_m,
                 cfg.vertical_white_m,
             ],
+            bias_m: Vector3::from(cfg.bias_m),
             previous_t: None,
         }
     }
 
     /// The slowly varying part of the position error now (metres, world ENU): the GPS walk
-    /// without the white noise. A controller flying on the estimate sits off the truth by this.
+    /// and the scripted bias, without the white noise. A controller flying on the estimate sits
+    /// off the truth by this.
     pub fn position_drift_m(&self) -> Vector3<f64> {
         Vector3::new(
             self.walks[0].value,
             self.walks[1].value,
             self.walks[2].value,
-        )
+        ) + self.bias_m
     }
 
     /// Advances the error processes to `timestamp_s` and returns the estimate of the true
@@ -229,7 +238,8 @@ impl StateEstimator {
             let draw: f64 = StandardNormal.sample(rng);
             self.white_m[k] * draw
         });
-        let position_error = Vector3::new(e[0] + noise[0], e[1] + noise[1], e[2] + noise[2]);
+        let position_error =
+            Vector3::new(e[0] + noise[0], e[1] + noise[1], e[2] + noise[2]) + self.bias_m;
         let attitude_error = UnitQuaternion::from_euler_angles(e[3], e[4], e[5]);
         Isometry3::from_parts(
             Translation3::from(world_from_camera.translation.vector + position_error),

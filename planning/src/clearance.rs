@@ -11,7 +11,7 @@
 
 use nalgebra::Point3;
 use parry3d::math::Vector as PVec;
-use parry3d::query::PointQuery;
+use parry3d::query::{PointQuery, Ray, RayCast};
 use parry3d::shape::{TriMesh, TriMeshFlags};
 use serde::{Deserialize, Serialize};
 
@@ -276,6 +276,37 @@ impl ObstacleShape {
         }
     }
 
+    /// Distance straight down from `p` to this shape's surface, if it lies below `p` within
+    /// `max_range_m`. A point inside the shape measures 0.
+    fn range_below(&self, p: &Point3<f64>, max_range_m: f64) -> Option<f64> {
+        match self {
+            ObstacleShape::Mesh {
+                mesh,
+                origin_m,
+                lo_m,
+                hi_m,
+                ..
+            } => {
+                if p.x < lo_m.x || p.x > hi_m.x || p.y < lo_m.y || p.y > hi_m.y || p.z < lo_m.z {
+                    return None;
+                }
+                let d = p - origin_m;
+                let ray = Ray::new(
+                    PVec::new(d.x as f32, d.y as f32, d.z as f32),
+                    PVec::new(0.0, 0.0, -1.0),
+                );
+                mesh.cast_local_ray(&ray, max_range_m as f32, true)
+                    .map(f64::from)
+            }
+            ObstacleShape::Cylinder { cx, cy, r, z0, z1 } => {
+                let inside_disc = (p.x - cx).powi(2) + (p.y - cy).powi(2) <= r * r;
+                (inside_disc && p.z >= *z0)
+                    .then(|| (p.z - z1).max(0.0))
+                    .filter(|&range| range <= max_range_m)
+            }
+        }
+    }
+
     fn clearance(&self, p: &Point3<f64>) -> f64 {
         match self {
             ObstacleShape::Mesh {
@@ -393,6 +424,25 @@ impl Environment {
             consider(&mut best, o.clearance(p), ClearanceSource::Obstacle(i));
         }
         best
+    }
+
+    /// What a downward rangefinder at `p` reads: the vertical distance (m) to the first surface
+    /// below `p` (terrain, a mesh obstacle or a cylinder), or `None` when nothing lies within
+    /// `max_range_m` below, the terrain does not cover `p`, or `p` is not finite. A point below
+    /// the terrain or inside an obstacle reads 0.
+    pub fn range_below(&self, p: &Point3<f64>, max_range_m: f64) -> Option<f64> {
+        if !p.iter().all(|v| v.is_finite()) {
+            return None;
+        }
+        let terrain = self
+            .terrain_height_at(p.x, p.y)
+            .map(|h| (p.z - h).max(0.0))
+            .filter(|&range| range <= max_range_m);
+        self.obstacles
+            .iter()
+            .filter_map(|o| o.range_below(p, max_range_m))
+            .chain(terrain)
+            .min_by(f64::total_cmp)
     }
 
     /// Checks the straight segments between the waypoints of `path`, sampled every
@@ -636,6 +686,64 @@ mod tests {
         assert!((c.clearance_m - 2.0).abs() < 1e-12);
         let c = env.clearance_at(&Point3::new(0.0, 4.0, 6.0)).unwrap();
         assert!((c.clearance_m - 5.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn the_range_below_meets_the_first_surface_under_the_point() {
+        let cube = Obstacle::Mesh {
+            positions_m: [
+                [9.5, -0.5, 0.5],
+                [10.5, -0.5, 0.5],
+                [10.5, 0.5, 0.5],
+                [9.5, 0.5, 0.5],
+                [9.5, -0.5, 1.5],
+                [10.5, -0.5, 1.5],
+                [10.5, 0.5, 1.5],
+                [9.5, 0.5, 1.5],
+            ]
+            .to_vec(),
+            faces: vec![
+                [0, 2, 1],
+                [0, 3, 2],
+                [4, 5, 6],
+                [4, 6, 7],
+                [0, 1, 5],
+                [0, 5, 4],
+                [1, 2, 6],
+                [1, 6, 5],
+                [2, 3, 7],
+                [2, 7, 6],
+                [3, 0, 4],
+                [3, 4, 7],
+            ],
+        };
+        let pillar = Obstacle::Cylinder {
+            center_x_m: 0.0,
+            center_y_m: 0.0,
+            radius_m: 1.0,
+            z_bottom_m: 0.0,
+            z_top_m: 2.0,
+        };
+        let hf = Heightfield::flat(-50.0, -50.0, 1.0, 101, 101, 0.0).unwrap();
+        let env = Environment::new(Some(hf), &[cube, pillar]).unwrap();
+        let range = |x: f64, y: f64, z: f64| env.range_below(&Point3::new(x, y, z), 10.0);
+        assert!(
+            (range(10.2, 0.1, 4.0).unwrap() - 2.5).abs() < 1e-5,
+            "cube top"
+        );
+        assert!(
+            (range(11.0, 0.1, 4.0).unwrap() - 4.0).abs() < 1e-9,
+            "beside it"
+        );
+        assert!(
+            (range(0.5, 0.0, 3.0).unwrap() - 1.0).abs() < 1e-12,
+            "pillar top"
+        );
+        assert_eq!(range(0.5, 0.0, 1.0), Some(0.0), "inside the pillar");
+        assert_eq!(range(20.0, 0.0, -1.0), Some(0.0), "under the ground");
+        assert_eq!(range(20.0, 0.0, 12.0), None, "out of range");
+        assert_eq!(range(80.0, 0.0, 1.0), None, "off the terrain");
+        assert_eq!(range(f64::NAN, 0.0, 1.0), None);
     }
 
     #[test]

@@ -71,7 +71,7 @@ pub struct RunRow {
     pub targets_mapped: Option<u64>,
     /// Distractors mapped.
     pub distractors_mapped: Option<u64>,
-    /// Safety interventions and collision events, where the mission records them.
+    /// The safety monitor's interventions, where the mission records them.
     pub safety_events: Option<u64>,
 }
 
@@ -296,10 +296,7 @@ pub fn read_run(
         min_clearance_m: f(m, "min_clearance_m"),
         targets_mapped: u(m, "targets_mapped"),
         distractors_mapped: u(m, "distractors_mapped"),
-        safety_events: m
-            .get("safety_events")
-            .and_then(Value::as_array)
-            .map(|a| a.len() as u64),
+        safety_events: u(m, "safety_interventions"),
     };
     let world_path = dir.join("world_gt").join("world.json");
     if !world_path.is_file() {

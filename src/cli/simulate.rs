@@ -31,6 +31,10 @@ pub struct SimulateArgs {
     /// Print `mission.json` on stdout.
     #[arg(long)]
     pub json: bool,
+    /// Fly on through collisions instead of ending the flight (`safety.allow_collisions`), for
+    /// debugging a plan.
+    #[arg(long)]
+    pub allow_collisions: bool,
 }
 
 fn load_config(path: Option<&PathBuf>) -> anyhow::Result<MissionConfig> {
@@ -52,7 +56,8 @@ fn load_config(path: Option<&PathBuf>) -> anyhow::Result<MissionConfig> {
 /// writes its outputs with `interrupted: true` and returns.
 pub fn run(args: SimulateArgs) -> anyhow::Result<()> {
     let started = std::time::Instant::now();
-    let config = load_config(args.config.as_ref())?;
+    let mut config = load_config(args.config.as_ref())?;
+    config.safety.allow_collisions |= args.allow_collisions;
     let world = World::from_name_or_path(&args.world)
         .with_context(|| format!("loading world `{}`", args.world))?;
     std::fs::create_dir_all(&args.out)

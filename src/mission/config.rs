@@ -57,6 +57,8 @@ pub struct MissionConfig {
     pub estimator: scarp_datasets::estimator::EstimatorConfig,
     /// Fragility analysis of each mapped rock.
     pub fragility: crate::fragility::FragilityConfig,
+    /// The safety layer: rangefinder, clearance monitor, and what a collision does.
+    pub safety: super::monitor::SafetyConfig,
 }
 
 impl Default for MissionConfig {
@@ -80,6 +82,7 @@ impl Default for MissionConfig {
             localization: crate::localization::config::LocalizationConfig::default(),
             estimator: scarp_datasets::estimator::EstimatorConfig::default(),
             fragility: crate::fragility::FragilityConfig::default(),
+            safety: super::monitor::SafetyConfig::default(),
         }
     }
 }
@@ -123,6 +126,7 @@ impl MissionConfig {
                 return Err(format!("`{key}` = {value}: must be a positive number"));
             }
         }
+        self.safety.validate()?;
         if !(self.search_inset_m.is_finite() && self.search_inset_m >= 0.0) {
             return Err(format!(
                 "`search_inset_m` = {}: must be ≥ 0",

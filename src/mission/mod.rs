@@ -21,6 +21,7 @@ pub mod evaluation;
 pub mod html;
 pub mod mapping;
 pub mod mode;
+pub mod monitor;
 pub mod motion;
 pub mod mount;
 pub mod perception;

@@ -163,9 +163,13 @@ pub struct MissionReport {
     /// Smallest true clearance per mode (`search`, `fine_localize`, `map`), metres.
     #[serde(default)]
     pub min_clearance_by_mode_m: std::collections::BTreeMap<String, f64>,
-    /// Collisions as events: when, in which mode, where, against what, how deep.
+    /// Collisions and the safety monitor's interventions as events: when, in which mode,
+    /// where, against what, how deep.
     #[serde(default)]
     pub safety_events: Vec<super::safety::SafetyEvent>,
+    /// Times the safety monitor sensed a surface inside its safety radius and climbed.
+    #[serde(default)]
+    pub safety_interventions: usize,
     /// Frames taken in Search, FineLocalize and Map modes.
     pub frames_search: usize,
     /// Frames taken while flying fine-localization circles.

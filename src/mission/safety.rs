@@ -12,10 +12,11 @@ use serde::{Deserialize, Serialize};
 
 use super::mode::Mode;
 
-/// One collision: consecutive steps closer than the collision radius to one surface.
+/// One collision (consecutive steps closer than the collision radius to one surface), or one
+/// intervention of the safety monitor (a sensed surface inside its safety radius).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SafetyEvent {
-    /// `collision`.
+    /// `collision` or `intervention`.
     pub kind: String,
     /// Mission time of the first step in collision, seconds.
     pub start_time_s: f64,
@@ -137,6 +138,30 @@ impl SafetyLog {
                 Some(event)
             }
         }
+    }
+
+    /// Records an intervention of the safety monitor at `time_s`, with the true clearance and
+    /// obstacle at that step (ground truth, for the report).
+    pub fn record_intervention(
+        &mut self,
+        time_s: f64,
+        mode: Mode,
+        position_true_m: [f64; 3],
+        sample: ClearanceSample,
+    ) -> SafetyEvent {
+        let event = SafetyEvent {
+            kind: "intervention".into(),
+            start_time_s: time_s,
+            end_time_s: time_s,
+            mode: mode.as_str().into(),
+            target: mode.target().map(u64::from),
+            position_true_m,
+            obstacle: self.obstacle_name(sample.source),
+            min_clearance_m: sample.clearance_m,
+            steps: 1,
+        };
+        self.events.push(event.clone());
+        event
     }
 
     /// Ends the collision in progress, if any, and returns it.

@@ -8,6 +8,9 @@ use std::time::Instant;
 
 use anyhow::Context;
 use nalgebra::{Isometry3, Point3, Vector3};
+use rand::rngs::Xoshiro256PlusPlus;
+use rand::{RngExt, SeedableRng};
+use rand_distr::StandardNormal;
 use scarp_datasets::estimator::StateEstimator;
 use scarp_datasets::noise::derive_seed;
 use scarp_datasets::render::Renderer;
@@ -23,6 +26,7 @@ use super::catalog::{Catalog, MissionTarget, TargetStatus, is_already_handled};
 use super::config::MissionConfig;
 use super::mapping::{MappingSession, finish_target};
 use super::mode::{FlightLogEntry, Mode};
+use super::monitor::{SafetyMonitor, Senses, nearest_depth_m};
 use super::motion::MotionSystem;
 use super::mount::CameraMount;
 use super::perception::{Perception, center_in_box};
@@ -128,6 +132,10 @@ pub struct Mission<'a> {
     frame_index: u64,
     /// The flight's true clearance and its collisions.
     safety: SafetyLog,
+    /// The safety layer acting on the rangefinder and the depth camera.
+    monitor: SafetyMonitor,
+    /// A collision ended the flight.
+    crashed: bool,
     /// The last FineLocalize depth image and its estimated pose: where the ground under a
     /// target is, in the frame the vehicle flies in.
     last_depth: Option<(scarp_slam::image::DepthImage, Isometry3<f64>)>,
@@ -216,6 +224,8 @@ impl<'a> Mission<'a> {
                     .map(|(name, _)| name)
                     .collect(),
             ),
+            monitor: SafetyMonitor::new(&config.safety),
+            crashed: false,
             last_depth: None,
             recenter_attempts: 0,
             estimator_error_by_target: std::collections::HashMap::new(),
@@ -282,6 +292,9 @@ impl<'a> Mission<'a> {
             if self.mode == Mode::Done {
                 break "complete".to_string();
             }
+            if self.crashed {
+                break "crashed".to_string();
+            }
             if self.motion.time_s() > self.inputs.config.max_sim_time_s {
                 break "timeout".to_string();
             }
@@ -308,8 +321,9 @@ impl<'a> Mission<'a> {
     fn step(&mut self, timings: &mut StageTimings) -> anyhow::Result<()> {
         let t = self.motion.time_s() + self.camera_period_s();
         let clock = Instant::now();
-        let drift = self.navigation_error_m();
-        self.motion.advance_to(t, &drift)?;
+        // The climb reflex makes the controller believe it is lower than it is.
+        let flown = self.navigation_error_m() - Vector3::z() * self.monitor.climb_m();
+        self.motion.advance_to(t, &flown)?;
         let t = self.motion.time_s();
         let world_from_body = self.motion.world_from_body();
         let position = world_from_body.translation.vector;
@@ -326,12 +340,21 @@ impl<'a> Mission<'a> {
                 position.y,
                 position.z
             );
+            if !self.inputs.config.safety.allow_collisions {
+                tracing::warn!(
+                    "the vehicle crashed: the flight ends (--allow-collisions flies on)"
+                );
+                self.crashed = true;
+                timings.flight_s += clock.elapsed().as_secs_f64();
+                return Ok(());
+            }
         }
         timings.flight_s += clock.elapsed().as_secs_f64();
 
         self.slew_mount(t);
         let truth = world_from_body * self.mount.body_from_camera();
-        let estimate = self.estimator.observe(t, &truth);
+        let mut estimate = self.estimator.observe(t, &truth);
+        estimate.translation.vector.z += self.monitor.height_correction_m();
         self.log.push(FlightLogEntry {
             time_s: t,
             world_from_camera_truth: truth,
@@ -341,6 +364,7 @@ impl<'a> Mission<'a> {
         let clock = Instant::now();
         let frame = self.take_frame(t, &truth)?;
         timings.render_s += clock.elapsed().as_secs_f64();
+        self.watch_clearance(t, &position, &frame);
 
         match self.mode {
             Mode::Search => {
@@ -413,16 +437,61 @@ impl<'a> Mission<'a> {
         Ok(())
     }
 
+    /// The safety layer's step: reads the rangefinder at the true position (the map predicts
+    /// its reading at the state estimator's position, truth + its drift) and the frame's
+    /// nearest depth, updates the monitor, and records an intervention.
+    fn watch_clearance(&mut self, t: f64, position: &Vector3<f64>, frame: &RgbdFrame) {
+        let config = &self.inputs.config.safety;
+        let max_range = config.rangefinder_max_range_m;
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(derive_seed(
+            self.inputs.seed ^ 0x7261_6e67_6566,
+            self.frame_index,
+        ));
+        let dropped = rng.random::<f64>() < config.rangefinder_dropout_probability;
+        let noise_m = config.rangefinder_sigma_m * rng.sample::<f64, _>(StandardNormal);
+        let truth = Point3::from(*position);
+        let senses = Senses {
+            range_measured_m: self
+                .env
+                .range_below(&truth, max_range)
+                .filter(|_| !dropped)
+                .map(|r| (r + noise_m).max(0.0)),
+            range_expected_m: self
+                .env
+                .range_below(&(truth + self.estimator.position_drift_m()), max_range),
+            nearest_depth_m: nearest_depth_m(&frame.depth_m, &self.camera),
+        };
+        let step = self.monitor.update(t, &senses);
+        if step.intervention_started
+            && let Some(c) = self.env.clearance_at(&truth)
+        {
+            let event = self
+                .safety
+                .record_intervention(t, self.mode, (*position).into(), c);
+            tracing::warn!(
+                "safety intervention at t = {t:.1} s in {}: a surface sensed at {:.2} m (inside {:.2} m), climbing; true clearance {:.2} m to {}",
+                event.mode,
+                step.sensed_clearance_m.unwrap_or(f64::NAN),
+                config.safety_radius_m,
+                event.min_clearance_m,
+                event.obstacle
+            );
+        }
+    }
+
     /// What the controller's position estimate is off by: while mapping with
     /// `mapping.fly_on_odometry`, the vehicle flies on the map's odometry (anchored at the state
     /// estimate when mapping began, so the rings stay put around the rock while the GPS walk
-    /// wanders); otherwise on the state estimate.
+    /// wanders); otherwise on the state estimate, its height corrected by the rangefinder.
     fn navigation_error_m(&self) -> Vector3<f64> {
         self.mapping
             .as_ref()
             .filter(|_| self.inputs.config.mapping.fly_on_odometry)
             .and_then(MappingSession::navigation_error_m)
-            .unwrap_or_else(|| self.estimator.position_drift_m())
+            .unwrap_or_else(|| {
+                self.estimator.position_drift_m()
+                    + Vector3::z() * self.monitor.height_correction_m()
+            })
     }
 
     /// Turns the camera mount toward the pitch the mapping rings ask for at the reference's
@@ -885,6 +954,10 @@ impl<'a> Mission<'a> {
         self.report.collisions = self.safety.collision_steps;
         self.report.min_clearance_by_mode_m = self.safety.min_clearance_by_mode_m.clone();
         self.report.safety_events = self.safety.events.clone();
+        self.report
+            .safety_events
+            .sort_by(|a, b| a.start_time_s.total_cmp(&b.start_time_s));
+        self.report.safety_interventions = self.monitor.interventions;
         for target in self.targets.values_mut() {
             target.report.min_clearance_m = u32::try_from(target.report.id)
                 .ok()
