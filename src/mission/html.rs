@@ -19,6 +19,7 @@ use scarp_slam::{PinholeCamera, TriangleMesh};
 use super::catalog::Catalog;
 use super::mode::{FlightLogEntry, Mode};
 use super::report::MissionReport;
+use super::safety::SafetyEvent;
 
 /// Side of the square top-down map, pixels.
 const MAP_PX: u32 = 900;
@@ -51,6 +52,7 @@ pub fn render_map(
     world: &World,
     log: &[FlightLogEntry],
     targets: &Catalog,
+    safety_events: &[SafetyEvent],
 ) -> anyhow::Result<Vec<u8>> {
     let (x0, y0, x1, y1) = world.heightfield.extent();
     let mut buffer = vec![255u8; (MAP_PX * MAP_PX * 3) as usize];
@@ -135,6 +137,27 @@ pub fn render_map(
                     .draw_series(std::iter::once(PathElement::new(
                         ring,
                         BLACK.stroke_width(1),
+                    )))
+                    .map_err(draw_err)?;
+            }
+        }
+        // Collisions as red crosses, the monitor's interventions as orange triangles.
+        for event in safety_events {
+            let at = (event.position_true_m[0], event.position_true_m[1]);
+            if event.kind == "collision" {
+                chart
+                    .draw_series(std::iter::once(Cross::new(
+                        at,
+                        7,
+                        RGBColor(220, 0, 0).stroke_width(3),
+                    )))
+                    .map_err(draw_err)?;
+            } else {
+                chart
+                    .draw_series(std::iter::once(TriangleMarker::new(
+                        at,
+                        6,
+                        RGBColor(255, 140, 0).filled(),
                     )))
                     .map_err(draw_err)?;
             }
@@ -252,7 +275,7 @@ pub fn write_report(
     log: &[FlightLogEntry],
     targets: &Catalog,
 ) -> anyhow::Result<()> {
-    let map = render_map(world, log, targets)?;
+    let map = render_map(world, log, targets, &report.safety_events)?;
     let cfg = PlotConfig {
         width_px: MAP_PX,
         height_px: MAP_PX,
@@ -266,11 +289,11 @@ pub fn write_report(
 <style>body{{font-family:sans-serif;margin:2em}}table{{border-collapse:collapse}}\
 td,th{{border:1px solid #bbb;padding:3px 8px;text-align:right}}img{{margin:2px}}</style></head><body>\n\
 <h1>scarp mission on world <code>{}</code> (seed {})</h1>\n\
-<p>{}: {} of {} targets mapped; {} distractors mapped; missed true targets: {:?}; collisions: {}.<br>\
+<p>{}: {} of {} targets mapped; {} distractors mapped; missed true targets: {:?}; collisions: {} camera steps; safety interventions: {}.<br>\
 Simulated {:.0} s in {:.0} s of wall time (real-time factor {:.1}).</p>\n\
 <h2>Map</h2><p>Terrain hillshade; flight path by mode (search blue, fine localization orange, \
 mapping green); true targets red, distractors grey; localization 2σ ellipses purple; mapping \
-cylinders black.</p><img src=\"map.png\" width=\"700\">\n",
+cylinders black; collisions red crosses, safety interventions orange triangles.</p><img src=\"map.png\" width=\"700\">\n",
         report.world,
         report.seed,
         report.end_reason,
@@ -279,6 +302,7 @@ cylinders black.</p><img src=\"map.png\" width=\"700\">\n",
         report.distractors_mapped,
         report.targets_missed,
         report.collisions,
+        report.safety_interventions,
         report.sim_time_s,
         report.wall_time_s,
         report.real_time_factor
