@@ -105,6 +105,12 @@ fn lawnmower_and_circle_localize_target_one() {
         error_m <= bias_m + 0.3,
         "estimated poses: centroid error {error_m} m, pose bias {bias_m} m"
     );
+    // In the frame the vehicle flies in, the bias drops out: what is left is the filter's own.
+    let in_estimate_frame = t["localization_error_estimate_frame_m"].as_f64().unwrap();
+    assert!(
+        in_estimate_frame <= 0.5 && in_estimate_frame < error_m.max(0.3),
+        "estimate-frame error {in_estimate_frame} m, absolute {error_m} m"
+    );
     assert!(
         json["false_targets"].as_array().unwrap().is_empty(),
         "{json}"

@@ -1,11 +1,12 @@
 //! `scarp localize`: run detection, tracking and the depth filter over a sequence and write
 //! each target's point set, ellipsoid and status.
 
+use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use clap::{Args, ValueEnum};
-use nalgebra::Isometry3;
+use nalgebra::{Isometry3, Vector3};
 use rand::SeedableRng;
 use rand::rngs::Xoshiro256PlusPlus;
 use scarp_datasets::sequence::{Sequence, read_mask_png, read_rgb_png};
@@ -21,6 +22,7 @@ use crate::detection::{BoundingBox, Detection, SimulatedDetector, SimulatedDetec
 use crate::evaluation::mesh::MeshDistance;
 use crate::localization::check_box;
 use crate::localization::{LocalizationConfig, Target, TargetCatalog, TargetStatus};
+use crate::mission::evaluation::estimate_frame_error_m;
 use crate::tracking::{Tracker, TrackerConfig};
 
 /// Localize targets in a sequence with the bounding-box depth filter.
@@ -135,6 +137,11 @@ pub struct TargetSummary {
     /// Distance from the centre to the true rock's centroid, m.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub centroid_error_m: Option<f64>,
+    /// The error in the frame the vehicle flies in: from the centre to the true centroid moved
+    /// by the mean estimate − truth position error over the frames that updated this target,
+    /// m. Needs both trajectories in the sequence.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub localization_error_estimate_frame_m: Option<f64>,
     /// Fraction of points within 0.5 m of the true rock's surface.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub fraction_on_surface: Option<f64>,
@@ -353,6 +360,9 @@ pub fn localize(args: &LocalizeArgs) -> anyhow::Result<LocalizeSummary> {
     };
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(args.seed);
     let mut merged = 0;
+    // Per target: the sum of estimate − truth positions over the frames that updated it, and
+    // their count.
+    let mut pose_error_by_target: HashMap<u32, (Vector3<f64>, usize)> = HashMap::new();
     let bar = super::progress_bar(seq.len() as u64, "localizing");
     for index in 0..seq.len() {
         let world_from_camera = frame_pose(&seq, index, args.poses)?;
@@ -382,6 +392,20 @@ pub fn localize(args: &LocalizeArgs) -> anyhow::Result<LocalizeSummary> {
             tracing::debug!(frame = index, target = id, "removed as false");
         }
         merged += report.merged.len();
+        let entry = &seq.entries[index];
+        if let (Some(estimate), Some(truth)) = (
+            entry.world_from_camera_estimate,
+            entry.world_from_camera_truth,
+        ) {
+            let error = estimate.translation.vector - truth.translation.vector;
+            for id in &report.updated {
+                let slot = pose_error_by_target
+                    .entry(*id)
+                    .or_insert((Vector3::zeros(), 0));
+                slot.0 += error;
+                slot.1 += 1;
+            }
+        }
         bar.inc(1);
     }
     bar.finish_and_clear();
@@ -409,11 +433,18 @@ pub fn localize(args: &LocalizeArgs) -> anyhow::Result<LocalizeSummary> {
             gt_rock_id: None,
             gt_role: None,
             centroid_error_m: None,
+            localization_error_estimate_frame_m: None,
             fraction_on_surface: None,
         };
         if let Some(world) = &world {
             match compare_with_world(target, world, args.match_radius_m)? {
                 Some((rock, role, error_m, fraction)) => {
+                    summary.localization_error_estimate_frame_m = pose_error_by_target
+                        .get(&target.id())
+                        .zip(world.rocks.iter().find(|r| r.id == rock))
+                        .map(|((sum, n), r)| {
+                            estimate_frame_error_m(&c, &r.centroid, &(sum / *n as f64))
+                        });
                     summary.gt_rock_id = Some(rock);
                     summary.gt_role = Some(role);
                     summary.centroid_error_m = Some(error_m);

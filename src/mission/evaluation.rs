@@ -23,6 +23,17 @@ pub fn nearest_rock<'w>(world: &'w World, center: &Point3<f64>) -> Option<(&'w R
         .min_by(|a, b| a.1.total_cmp(&b.1))
 }
 
+/// The localization error in the frame the vehicle flies in: the distance from the localized
+/// centre to the true centroid moved by the estimator's mean position error (estimate − truth)
+/// over the frames that localized the target, metres.
+pub fn estimate_frame_error_m(
+    center: &Point3<f64>,
+    true_centroid: &Point3<f64>,
+    estimator_error_m: &nalgebra::Vector3<f64>,
+) -> f64 {
+    (true_centroid + estimator_error_m - center).norm()
+}
+
 /// Fills each target's `gt_rock_id`, `gt_role`, `localization_error_m` and (where the
 /// estimator's error at its localization is known) `localization_error_estimate_frame_m`, and
 /// the report's `distractors_mapped` and `targets_missed`.
@@ -34,10 +45,10 @@ pub fn ground_truth_summary(world: &World, targets: &mut Catalog, report: &mut M
                 m.report.gt_rock_id = Some(rock.id);
                 m.report.gt_role = Some(rock.role.as_str().into());
                 m.report.localization_error_m = Some(distance);
-                m.report.localization_error_estimate_frame_m = m
-                    .report
-                    .estimator_error_at_localization_m
-                    .map(|e| (rock.centroid + nalgebra::Vector3::from(e) - center).norm());
+                m.report.localization_error_estimate_frame_m =
+                    m.report.estimator_error_at_localization_m.map(|e| {
+                        estimate_frame_error_m(&center, &rock.centroid, &nalgebra::Vector3::from(e))
+                    });
             }
             None => {
                 m.report.gt_rock_id = None;
