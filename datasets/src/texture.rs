@@ -113,12 +113,16 @@ impl AlbedoMap {
 
     /// Bilinear albedo at (x, y), clamped to the map's edge.
     pub fn sample(&self, x_m: f64, y_m: f64) -> [f32; 3] {
-        let gx = ((x_m - self.origin_x_m) / self.texel_m).clamp(0.0, (self.nx - 1) as f64);
-        let gy = ((y_m - self.origin_y_m) / self.texel_m).clamp(0.0, (self.ny - 1) as f64);
-        let (i, j) = (
-            (gx as usize).min(self.nx - 2),
-            (gy as usize).min(self.ny - 2),
-        );
+        // Clamped just inside the last cell, so the cell index needs no second clamp; an i32
+        // cast is cheaper than a usize one and the maps are far smaller than 2³¹ texels a side.
+        let inv_texel = 1.0 / self.texel_m;
+        let gx = ((x_m - self.origin_x_m) * inv_texel)
+            .min((self.nx - 1) as f64 - 1e-9)
+            .max(0.0);
+        let gy = ((y_m - self.origin_y_m) * inv_texel)
+            .min((self.ny - 1) as f64 - 1e-9)
+            .max(0.0);
+        let (i, j) = (gx as i32 as usize, gy as i32 as usize);
         let (fx, fy) = ((gx - i as f64) as f32, (gy - j as f64) as f32);
         // Runs for every terrain pixel of every frame: two row slices (two bounds checks) and
         // the four corner weights once, not per channel.
