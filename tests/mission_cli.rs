@@ -4,6 +4,7 @@
 mod common;
 use common::{scarp, test_data};
 
+use std::path::Path;
 use std::process::Command;
 
 #[test]
@@ -113,32 +114,36 @@ fn small_world_mission_finds_maps_and_measures_its_target() {
     assert!(!geo["features"].as_array().unwrap().is_empty());
 }
 
-/// Runs `scarp simulate` on the small world with the small mission's settings plus `extra`
-/// TOML, and returns `mission.json` and stderr.
-fn simulate_small(extra: &str, flags: &[&str]) -> (serde_json::Value, String) {
-    let dir = tempfile::tempdir().unwrap();
-    let config = dir.path().join("mission.toml");
-    let base = std::fs::read_to_string(test_data("small_mission.toml")).unwrap();
-    std::fs::write(&config, format!("{base}\n{extra}")).unwrap();
-    let out_dir = dir.path().join("mission");
+/// Runs `scarp simulate` on the small world in `dir` with the mission file `config` (TOML
+/// text) and `flags`; the run's folder is `dir/mission`.
+fn simulate_in(dir: &Path, config: &str, flags: &[&str]) -> std::process::Output {
+    let path = dir.join("mission.toml");
+    std::fs::write(&path, config).unwrap();
+    let world = test_data("small_world.toml");
+    let out_dir = dir.join("mission");
     let mut args = vec![
         "simulate",
         "--world",
-        &test_data("small_world.toml"),
+        &world,
         "--config",
-        config.to_str().unwrap(),
+        path.to_str().unwrap(),
         "--out",
         out_dir.to_str().unwrap(),
-    ]
-    .into_iter()
-    .map(String::from)
-    .collect::<Vec<_>>();
-    args.extend(flags.iter().map(|f| f.to_string()));
-    let args: Vec<&str> = args.iter().map(String::as_str).collect();
-    let out = scarp(&args);
+    ];
+    args.extend_from_slice(flags);
+    scarp(&args)
+}
+
+/// Runs the small mission's settings plus `extra` TOML; returns `mission.json` and stderr.
+fn simulate_small(extra: &str, flags: &[&str]) -> (serde_json::Value, String) {
+    let dir = tempfile::tempdir().unwrap();
+    let base = std::fs::read_to_string(test_data("small_mission.toml")).unwrap();
+    let out = simulate_in(dir.path(), &format!("{base}\n{extra}"), flags);
     let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
     assert!(out.status.success(), "{stderr}");
-    let json = serde_json::from_slice(&std::fs::read(out_dir.join("mission.json")).unwrap())
+    let json = std::fs::read(dir.path().join("mission/mission.json"))
+        .map_err(|e| e.to_string())
+        .and_then(|bytes| serde_json::from_slice(&bytes).map_err(|e| e.to_string()))
         .unwrap_or_else(|e| panic!("mission.json: {e}\n{stderr}"));
     (json, stderr)
 }
@@ -189,23 +194,12 @@ fn a_collision_ends_the_flight() {
 #[test]
 fn a_collision_is_an_event_with_time_place_and_obstacle() {
     let dir = tempfile::tempdir().unwrap();
-    let config = dir.path().join("mission.toml");
-    std::fs::write(
-        &config,
+    let out = simulate_in(
+        dir.path(),
         "search_height_agl_m = 12.0\nsearch_inset_m = 5.0\nmax_sim_time_s = 6.0\ncollision_radius_m = 40.0\n",
-    )
-    .unwrap();
+        &["--allow-collisions"],
+    );
     let out_dir = dir.path().join("mission");
-    let out = scarp(&[
-        "simulate",
-        "--allow-collisions",
-        "--world",
-        &test_data("small_world.toml"),
-        "--config",
-        config.to_str().unwrap(),
-        "--out",
-        out_dir.to_str().unwrap(),
-    ]);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "{stderr}");
     assert!(stderr.contains("collision at t ="), "{stderr}");
@@ -235,21 +229,11 @@ fn a_collision_is_an_event_with_time_place_and_obstacle() {
 #[test]
 fn bad_mission_config_key_is_named() {
     let dir = tempfile::tempdir().unwrap();
-    let config = dir.path().join("mission.toml");
-    std::fs::write(&config, "search_hieght_agl_m = 5\n").unwrap();
-    let out = scarp(&[
-        "simulate",
-        "--world",
-        &test_data("small_world.toml"),
-        "--config",
-        config.to_str().unwrap(),
-        "--out",
-        dir.path().join("out").to_str().unwrap(),
-    ]);
+    let out = simulate_in(dir.path(), "search_hieght_agl_m = 5\n", &[]);
     assert!(!out.status.success());
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(stderr.contains("search_hieght_agl_m"), "{stderr}");
-    assert!(!dir.path().join("out/mission.json").exists());
+    assert!(!dir.path().join("mission/mission.json").exists());
 }
 
 #[test]

@@ -635,38 +635,40 @@ mod tests {
         assert!((c.clearance_m - 2.0 / 2f64.sqrt()).abs() < 1e-3, "{c:?}");
     }
 
+    /// A unit cube mesh centred at (10, 0, 1), outward faces.
+    fn unit_cube_at_10_0_1() -> Obstacle {
+        Obstacle::Mesh {
+            positions_m: vec![
+                [9.5, -0.5, 0.5],
+                [10.5, -0.5, 0.5],
+                [10.5, 0.5, 0.5],
+                [9.5, 0.5, 0.5],
+                [9.5, -0.5, 1.5],
+                [10.5, -0.5, 1.5],
+                [10.5, 0.5, 1.5],
+                [9.5, 0.5, 1.5],
+            ],
+            faces: vec![
+                [0, 2, 1],
+                [0, 3, 2],
+                [4, 5, 6],
+                [4, 6, 7],
+                [0, 1, 5],
+                [0, 5, 4],
+                [1, 2, 6],
+                [1, 6, 5],
+                [2, 3, 7],
+                [2, 7, 6],
+                [3, 0, 4],
+                [3, 4, 7],
+            ],
+        }
+    }
+
     #[test]
     fn cylinder_and_mesh_obstacles() {
-        // A unit cube mesh centred at (10, 0, 1), outward faces.
-        let v = [
-            [9.5, -0.5, 0.5],
-            [10.5, -0.5, 0.5],
-            [10.5, 0.5, 0.5],
-            [9.5, 0.5, 0.5],
-            [9.5, -0.5, 1.5],
-            [10.5, -0.5, 1.5],
-            [10.5, 0.5, 1.5],
-            [9.5, 0.5, 1.5],
-        ];
-        let f = vec![
-            [0, 2, 1],
-            [0, 3, 2],
-            [4, 5, 6],
-            [4, 6, 7],
-            [0, 1, 5],
-            [0, 5, 4],
-            [1, 2, 6],
-            [1, 6, 5],
-            [2, 3, 7],
-            [2, 7, 6],
-            [3, 0, 4],
-            [3, 4, 7],
-        ];
         let obstacles = vec![
-            Obstacle::Mesh {
-                positions_m: v.to_vec(),
-                faces: f,
-            },
+            unit_cube_at_10_0_1(),
             Obstacle::Cylinder {
                 center_x_m: 0.0,
                 center_y_m: 0.0,
@@ -690,33 +692,7 @@ mod tests {
 
     #[test]
     fn the_range_below_meets_the_first_surface_under_the_point() {
-        let cube = Obstacle::Mesh {
-            positions_m: [
-                [9.5, -0.5, 0.5],
-                [10.5, -0.5, 0.5],
-                [10.5, 0.5, 0.5],
-                [9.5, 0.5, 0.5],
-                [9.5, -0.5, 1.5],
-                [10.5, -0.5, 1.5],
-                [10.5, 0.5, 1.5],
-                [9.5, 0.5, 1.5],
-            ]
-            .to_vec(),
-            faces: vec![
-                [0, 2, 1],
-                [0, 3, 2],
-                [4, 5, 6],
-                [4, 6, 7],
-                [0, 1, 5],
-                [0, 5, 4],
-                [1, 2, 6],
-                [1, 6, 5],
-                [2, 3, 7],
-                [2, 7, 6],
-                [3, 0, 4],
-                [3, 4, 7],
-            ],
-        };
+        let cube = unit_cube_at_10_0_1();
         let pillar = Obstacle::Cylinder {
             center_x_m: 0.0,
             center_y_m: 0.0,

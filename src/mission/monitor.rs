@@ -23,6 +23,7 @@ use std::collections::VecDeque;
 
 use scarp_slam::PinholeCamera;
 use scarp_slam::image::DepthImage;
+use scarp_slam::stats::median;
 use serde::{Deserialize, Serialize};
 
 /// The safety layer's settings (`[safety]` in a mission file).
@@ -209,7 +210,7 @@ impl SafetyMonitor {
             .is_some_and(|t| time_s - t <= c.fade_time_s);
         let fade = (-dt / c.fade_time_s).exp();
         let target = if fresh {
-            median(&self.innovations_m)
+            median(self.innovations_m.make_contiguous()).unwrap_or(0.0)
         } else {
             self.innovations_m.clear();
             self.correction_m * fade
@@ -267,16 +268,6 @@ pub fn nearest_depth_m(depth_m: &DepthImage, camera: &PinholeCamera) -> Option<f
         }
     }
     nearest
-}
-
-fn median(values: &VecDeque<f64>) -> f64 {
-    let mut sorted: Vec<f64> = values.iter().copied().collect();
-    sorted.sort_by(f64::total_cmp);
-    match sorted.len() {
-        0 => 0.0,
-        n if n % 2 == 1 => sorted[n / 2],
-        n => 0.5 * (sorted[n / 2 - 1] + sorted[n / 2]),
-    }
 }
 
 #[cfg(test)]
