@@ -247,6 +247,8 @@ pub struct TsdfVolume {
     index: HashMap<BlockCoord, u32, BuildBlockHasher>,
     coords: Vec<BlockCoord>,
     blocks: Vec<Block>,
+    /// Buffers reused from frame to frame by the integration (no voxel data).
+    scratch: integrate::Scratch,
 }
 
 impl TsdfVolume {
@@ -261,6 +263,7 @@ impl TsdfVolume {
             index: HashMap::with_hasher(BuildBlockHasher::default()),
             coords: Vec::new(),
             blocks: Vec::new(),
+            scratch: integrate::Scratch::default(),
         })
     }
 
