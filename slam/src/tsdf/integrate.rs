@@ -235,11 +235,21 @@ fn touched_blocks(
                 // Viewing ray of pixel (u, v) at unit camera depth, world axes, block units;
                 // stepped along the row.
                 let mut ray = r * Vector3::new(-cx / fx, (v as f32 - cy) / fy, 1.0);
+                // The end cells of the previous pixel's band. A band whose end cells equal its
+                // neighbour's and differ from each other along at most one axis crosses exactly
+                // the same blocks (the cells between them on that axis), so most pixels skip
+                // the walk. (With two or more axes the corner it cuts could differ.)
+                let mut previous = [[i32::MIN; 3]; 2];
                 for &d in &data[v * width..(v + 1) * width] {
                     if d >= config.min_depth_m && d <= config.max_depth_m {
                         let a = origin + ray * (d - truncation);
                         let b = origin + ray * (d + truncation);
-                        walk_blocks(&a, &b, &mut visit);
+                        let ends = [a, b].map(|p| [floor_i32(p.x), floor_i32(p.y), floor_i32(p.z)]);
+                        let axes = (0..3).filter(|&k| ends[0][k] != ends[1][k]).count();
+                        if ends != previous || axes > 1 {
+                            previous = ends;
+                            walk_blocks(&a, &b, &mut visit);
+                        }
                     }
                     ray += step_u;
                 }
@@ -299,6 +309,13 @@ fn walk_blocks(a: &Vector3<f32>, b: &Vector3<f32>, mut visit: impl FnMut(BlockCo
         t_max[axis] += t_delta[axis];
         visit(cell);
     }
+}
+
+/// Lane-wise floor of non-negative values below 2^31 (truncation toward zero is the floor
+/// there), without the libm call `f32::floor` becomes on baseline x86-64.
+#[inline(always)]
+fn floor_small(x: f32x8) -> f32x8 {
+    x.fast_trunc_int().round_float()
 }
 
 /// Everything the per-voxel update needs, in f32.
@@ -384,7 +401,7 @@ impl Kernel {
         let agree = splat(0.5 * self.truncation_m);
         let max_weight = splat(self.max_weight);
         // The last index whose 2×2 neighbourhood lies inside the depth image.
-        let last_quad = depth.len().saturating_sub(w + 2);
+        let last_quad = splat(depth.len().saturating_sub(w + 2) as f32);
         let Block {
             tsdf,
             weight,
@@ -408,17 +425,18 @@ impl Kernel {
                 // Inside the image 0 ≤ u, v < 2^31, so truncation is the floor (neither the libm
                 // `floor` call nor a saturating conversion); outside lanes read pixel (0, 0).
                 let (u, v) = (inside.select(u, zero), inside.select(v, zero));
-                let (iu, iv) = (u.fast_trunc_int(), v.fast_trunc_int());
-                let (fu, fv) = (u - iu.round_float(), v - iv.round_float());
-                let (iu, iv) = (iu.to_array(), iv.to_array());
+                let (fu, fv) = (u - floor_small(u), v - floor_small(v));
+                // Index of the top-left pixel of the 2×2 neighbourhood, computed in f32 (exact:
+                // image sizes stay far below 2^24 pixels) and clamped so that every lane's
+                // neighbourhood lies in the image.
+                let quad = (v - fv) * splat(w as f32) + (u - fu);
+                let quad = quad.fast_min(last_quad).fast_trunc_int().to_array();
                 // Pixel loads (a gather: one voxel at a time).
-                let mut quad = [0usize; N];
                 let (mut d00, mut d01, mut d10, mut d11) =
                     ([0.0f32; N], [0.0; N], [0.0; N], [0.0; N]);
                 for x in 0..N {
-                    let q = (iv[x] as usize * w + iu[x] as usize).min(last_quad);
+                    let q = quad[x] as usize;
                     let p = &depth[q..q + w + 2];
-                    quad[x] = q;
                     (d00[x], d01[x], d10[x], d11[x]) = (p[0], p[1], p[w], p[w + 1]);
                 }
                 let (d00, d01, d10, d11) = (
@@ -471,8 +489,9 @@ impl Kernel {
                     if mask & (1 << x) == 0 {
                         continue;
                     }
-                    let nearest =
-                        quad[x] + ((right >> x) & 1) as usize + w * ((below >> x) & 1) as usize;
+                    let nearest = quad[x] as usize
+                        + ((right >> x) & 1) as usize
+                        + w * ((below >> x) & 1) as usize;
                     let c_old = color[base + x];
                     let c_obs = rgb.get(nearest).copied().unwrap_or(c_old);
                     // Colour blends in 16-bit fixed point (the observation's share in units of
