@@ -84,6 +84,10 @@ pub struct MapArgs {
     /// Ignore depth beyond this, metres.
     #[arg(long)]
     pub max_depth: Option<f32>,
+    /// Allocate a block only where at least this many pixels' truncation bands cross it in one
+    /// frame (default: `TsdfConfig`'s, 4; 1 allocates wherever any band reaches).
+    #[arg(long)]
+    pub min_block_support: Option<u32>,
     /// Drop mesh components with fewer triangles.
     #[arg(long, default_value_t = 200)]
     pub min_component_triangles: usize,
@@ -152,6 +156,9 @@ pub fn run(args: MapArgs) -> anyhow::Result<()> {
     };
     if let Some(m) = args.max_depth {
         config.max_depth_m = m;
+    }
+    if let Some(n) = args.min_block_support {
+        config.min_block_support = n;
     }
     anyhow::ensure!(
         !args.ba || args.poses == PoseSource::Odometry,

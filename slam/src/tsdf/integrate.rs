@@ -65,10 +65,11 @@ fn unpack(key: u64) -> BlockCoord {
 /// volume has seen a few frames.
 #[derive(Debug, Clone, Default)]
 pub(super) struct Scratch {
-    /// Packed keys of the blocks each row tile touches (sorted, unique after the tile pass).
-    tiles: Vec<Vec<u64>>,
-    /// All touched keys, sorted and unique.
-    keys: Vec<u64>,
+    /// Packed keys of the blocks each row tile touches and the number of pixels whose band
+    /// crosses each (sorted, unique after the tile pass).
+    tiles: Vec<Vec<(u64, u32)>>,
+    /// All touched keys and their pixel counts, sorted and unique.
+    keys: Vec<(u64, u32)>,
     /// Storage index of each touched block (`u32::MAX` while unallocated).
     indices: Vec<u32>,
     /// Per stored block: updated by this frame.
@@ -124,19 +125,21 @@ pub(super) fn integrate(
     }
     let mut scratch = std::mem::take(&mut volume.scratch);
     touched_blocks(volume, &mut scratch, frame, camera, world_from_camera);
-    // Look the touched blocks up in parallel (read-only), then allocate the missing ones
-    // serially in key order, which keeps storage order independent of the thread count.
+    // Look the touched blocks up in parallel (read-only), then allocate the missing ones with
+    // enough support serially in key order, which keeps storage order independent of the
+    // thread count.
     let index = &volume.index;
     scratch.indices.clear();
     scratch.indices.par_extend(
         scratch
             .keys
             .par_iter()
-            .map(|&k| index.get(&unpack(k)).copied().unwrap_or(u32::MAX)),
+            .map(|&(k, _)| index.get(&unpack(k)).copied().unwrap_or(u32::MAX)),
     );
+    let min_support = volume.config.min_block_support;
     let mut allocated = 0;
-    for (slot, &key) in scratch.indices.iter_mut().zip(&scratch.keys) {
-        if *slot == u32::MAX {
+    for (slot, &(key, support)) in scratch.indices.iter_mut().zip(&scratch.keys) {
+        if *slot == u32::MAX && support >= min_support {
             let coord = unpack(key);
             // Block counts stay far below u32::MAX (that would be 20 TB of voxels).
             let i = volume.blocks.len() as u32;
@@ -149,8 +152,12 @@ pub(super) fn integrate(
     }
     scratch.update.clear();
     scratch.update.resize(volume.blocks.len(), false);
+    let mut updated = 0;
     for &i in &scratch.indices {
-        scratch.update[i as usize] = true;
+        if let Some(u) = scratch.update.get_mut(i as usize) {
+            *u = true;
+            updated += 1;
+        }
     }
     let kernel = Kernel::new(&volume.config, camera, world_from_camera);
     let depth = frame.depth_m.as_slice();
@@ -163,7 +170,7 @@ pub(super) fn integrate(
         .filter(|(_, u)| **u)
         .for_each(|((block, coord), _)| kernel.update_block(block, coord, depth, rgb));
     let stats = IntegrationStats {
-        blocks_updated: scratch.keys.len(),
+        blocks_updated: updated,
         blocks_allocated: allocated,
     };
     volume.scratch = scratch;
@@ -171,7 +178,8 @@ pub(super) fn integrate(
 }
 
 /// Fills `scratch.keys` with the packed keys (sorted, unique) of the blocks that the truncation
-/// band around the measured depths touches, inside the ROI.
+/// band around the measured depths touches inside the ROI, each with the number of pixels
+/// whose band crosses it.
 fn touched_blocks(
     volume: &TsdfVolume,
     scratch: &mut Scratch,
@@ -216,53 +224,59 @@ fn touched_blocks(
         .enumerate()
         .for_each(|(tile, keys)| {
             keys.clear();
-            // The last few blocks seen (inside the ROI or not): neighbouring pixels mostly
-            // touch the same blocks, so only a cache miss pays for the ROI test and a push.
-            let mut recent = [u64::MAX; 4];
+            // The last few blocks seen (inside the ROI or not) and how many pixels' bands
+            // crossed each since it entered: neighbouring pixels mostly touch the same blocks,
+            // so only a cache miss pays for the ROI test and a push.
+            let mut recent = [(u64::MAX, 0u32); 4];
             let mut slot = 0;
             let mut visit = |b: BlockCoord| {
                 let Some(key) = pack(b) else { return };
-                if recent.contains(&key) {
+                if let Some(entry) = recent.iter_mut().find(|(k, _)| *k == key) {
+                    // Blocks outside the ROI stay at 0 and are never pushed.
+                    entry.1 += u32::from(entry.1 > 0);
                     return;
                 }
-                recent[slot] = key;
-                slot = (slot + 1) % recent.len();
-                if in_roi(b) {
-                    keys.push(key);
+                let (old, count) = recent[slot];
+                if count > 0 {
+                    keys.push((old, count));
                 }
+                recent[slot] = if in_roi(b) { (key, 1) } else { (key, 0) };
+                slot = (slot + 1) % recent.len();
             };
             for v in tile * ALLOCATION_ROWS..((tile + 1) * ALLOCATION_ROWS).min(height) {
                 // Viewing ray of pixel (u, v) at unit camera depth, world axes, block units;
                 // stepped along the row.
                 let mut ray = r * Vector3::new(-cx / fx, (v as f32 - cy) / fy, 1.0);
-                // The end cells of the previous pixel's band. A band whose end cells equal its
-                // neighbour's and differ from each other along at most one axis crosses exactly
-                // the same blocks (the cells between them on that axis), so most pixels skip
-                // the walk. (With two or more axes the corner it cuts could differ.)
-                let mut previous = [[i32::MIN; 3]; 2];
                 for &d in &data[v * width..(v + 1) * width] {
                     if d >= config.min_depth_m && d <= config.max_depth_m {
                         let a = origin + ray * (d - truncation);
                         let b = origin + ray * (d + truncation);
-                        let ends = [a, b].map(|p| [floor_i32(p.x), floor_i32(p.y), floor_i32(p.z)]);
-                        let axes = (0..3).filter(|&k| ends[0][k] != ends[1][k]).count();
-                        if ends != previous || axes > 1 {
-                            previous = ends;
-                            walk_blocks(&a, &b, &mut visit);
-                        }
+                        walk_blocks(&a, &b, &mut visit);
                     }
                     ray += step_u;
                 }
             }
-            keys.sort_unstable();
-            keys.dedup();
+            keys.extend(recent.iter().copied().filter(|&(_, count)| count > 0));
+            merge_counts(keys);
         });
     scratch.keys.clear();
     for tile in &scratch.tiles {
         scratch.keys.extend_from_slice(tile);
     }
-    scratch.keys.par_sort_unstable();
-    scratch.keys.dedup();
+    merge_counts(&mut scratch.keys);
+}
+
+/// Sorts `(key, count)` pairs by key and sums the counts of equal keys.
+fn merge_counts(keys: &mut Vec<(u64, u32)>) {
+    keys.par_sort_unstable_by_key(|&(k, _)| k);
+    keys.dedup_by(|next, kept| {
+        if next.0 == kept.0 {
+            kept.1 += next.1;
+            true
+        } else {
+            false
+        }
+    });
 }
 
 /// Visits every grid cell the segment from `a` to `b` (grid units) passes through, in order

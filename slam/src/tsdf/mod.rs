@@ -107,6 +107,13 @@ pub struct TsdfConfig {
     pub max_depth_m: f32,
     /// Only blocks intersecting this region are allocated or updated. Default none (everything).
     pub roi: Option<Roi>,
+    /// A new block is allocated only when the truncation bands of at least this many pixels of
+    /// one frame cross it; blocks already allocated are updated by any pixel. Depth noise
+    /// scatters single pixels' bands far in front of and behind the surface, and each such
+    /// stray band would otherwise allocate its own blocks (tripling a noisy full frame's
+    /// volume); a real surface crossing a block is seen by many pixels. Default 4. 1 allocates
+    /// every block any band touches.
+    pub min_block_support: u32,
 }
 
 impl Default for TsdfConfig {
@@ -118,6 +125,7 @@ impl Default for TsdfConfig {
             min_depth_m: 0.1,
             max_depth_m: 10.0,
             roi: None,
+            min_block_support: 4,
         }
     }
 }
@@ -149,6 +157,9 @@ impl TsdfConfig {
         }
         if !(self.max_depth_m.is_finite() && self.max_depth_m > self.min_depth_m) {
             return bad("max_depth_m", self.max_depth_m, "must exceed min_depth_m");
+        }
+        if self.min_block_support == 0 {
+            return bad("min_block_support", 0.0, "must be ≥ 1");
         }
         if let Some(roi) = &self.roi {
             roi.validate()?;
