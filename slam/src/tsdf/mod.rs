@@ -110,9 +110,10 @@ pub struct TsdfConfig {
     /// A new block is allocated only when the truncation bands of at least this many pixels of
     /// one frame cross it; blocks already allocated are updated by any pixel. Depth noise
     /// scatters single pixels' bands far in front of and behind the surface, and each such
-    /// stray band would otherwise allocate its own blocks (tripling a noisy full frame's
-    /// volume); a real surface crossing a block is seen by many pixels. Default 4. 1 allocates
-    /// every block any band touches.
+    /// stray band would otherwise allocate its own blocks; a real surface crossing a block is
+    /// seen by many pixels. Default 1 (every block any band touches). 4 cuts the noisy 12-frame
+    /// full-frame orbit from 60k to 40k blocks (clean: 20.9k → 20.3k) but lowers the target's
+    /// F-score at 1 cm by about 0.002 (fewer free-space observations near block corners).
     pub min_block_support: u32,
 }
 
@@ -125,7 +126,7 @@ impl Default for TsdfConfig {
             min_depth_m: 0.1,
             max_depth_m: 10.0,
             roi: None,
-            min_block_support: 4,
+            min_block_support: 1,
         }
     }
 }
