@@ -340,10 +340,14 @@ struct Kernel {
     cx: f32,
     cy: f32,
     width: usize,
-    /// Largest projected u (and v) with a pixel to its right (below): `width − 1`
-    /// (`height − 1`).
+    /// Projections (u, v) in [−½, `u_max`) × [−½, `v_max`) fall on a pixel: `width − ½`,
+    /// `height − ½`.
     u_max: f32,
     v_max: f32,
+    /// The largest u (v) with a pixel to its right (below), just under `width − 1`
+    /// (`height − 1`): projections on the outer half of a border pixel are clamped to it.
+    u_last: f32,
+    v_last: f32,
     voxel_size_m: f32,
     truncation_m: f32,
     max_weight: f32,
@@ -364,8 +368,13 @@ impl Kernel {
             cx: camera.cx as f32,
             cy: camera.cy as f32,
             width: camera.width as usize,
-            u_max: camera.width as f32 - 1.0,
-            v_max: camera.height as f32 - 1.0,
+            u_max: camera.width as f32 - 0.5,
+            v_max: camera.height as f32 - 0.5,
+            // 1/1024 pixel short of the last column (row): the bilinear weight of the pixel
+            // beyond is then 0.999, a depth error under 0.001 of the (agreeing, < ½ truncation)
+            // neighbour difference.
+            u_last: camera.width as f32 - 1.0 - 1.0 / 1024.0,
+            v_last: camera.height as f32 - 1.0 - 1.0 / 1024.0,
             voxel_size_m: config.voxel_size_m,
             truncation_m: config.truncation_m(),
             max_weight: config.max_weight,
@@ -377,8 +386,9 @@ impl Kernel {
     /// Updates every voxel of `block` (at block coordinate `coord`) that projects into the image
     /// in front of, or less than the truncation distance behind, the measured depth.
     ///
-    /// Depth is sampled at the voxel's sub-pixel projection (u, v), 0 ≤ u < width − 1,
-    /// 0 ≤ v < height − 1: bilinear when the four neighbouring pixels are measured and agree
+    /// Depth is sampled at the voxel's sub-pixel projection (u, v) (pixel centres at integers;
+    /// projections within half a pixel outside the outer centres are clamped onto them):
+    /// bilinear when the four neighbouring pixels are measured and agree
     /// within half the truncation distance, otherwise the nearest of them (none when that one is
     /// unmeasured). Colour comes from the nearest pixel. Observations weigh 1/z².
     ///
@@ -410,6 +420,8 @@ impl Kernel {
         let (zero, one, half) = (splat(0.0), splat(1.0), splat(0.5));
         let (min_depth, max_depth) = (splat(self.min_depth_m), splat(self.max_depth_m));
         let (u_max, v_max) = (splat(self.u_max), splat(self.v_max));
+        let (u_last, v_last) = (splat(self.u_last), splat(self.v_last));
+        let neg_half = splat(-0.5);
         let neg_truncation = splat(-self.truncation_m);
         let inv_truncation = splat(1.0 / self.truncation_m);
         let agree = splat(0.5 * self.truncation_m);
@@ -429,16 +441,19 @@ impl Kernel {
                 let u = fx * (splat(row.x) + sx) * inv_z + cx;
                 let v = fy * (splat(row.y) + sy) * inv_z + cy;
                 let inside = zc.simd_ge(min_depth)
-                    & u.simd_ge(zero)
-                    & v.simd_ge(zero)
+                    & u.simd_ge(neg_half)
+                    & v.simd_ge(neg_half)
                     & u.simd_lt(u_max)
                     & v.simd_lt(v_max);
                 if inside.to_bitmask() == 0 {
                     continue;
                 }
-                // Inside the image 0 ≤ u, v < 2^31, so truncation is the floor (neither the libm
+                // Projections on the outer half of a border pixel are clamped onto that pixel
+                // (the sample is then that pixel's depth, as the nearest-pixel rule gives).
+                // Clamped, 0 ≤ u, v < 2^31, so truncation is the floor (neither the libm
                 // `floor` call nor a saturating conversion); outside lanes read pixel (0, 0).
-                let (u, v) = (inside.select(u, zero), inside.select(v, zero));
+                let u = inside.select(u.fast_max(zero).fast_min(u_last), zero);
+                let v = inside.select(v.fast_max(zero).fast_min(v_last), zero);
                 let (fu, fv) = (u - floor_small(u), v - floor_small(v));
                 // Index of the top-left pixel of the 2×2 neighbourhood, computed in f32 (exact:
                 // image sizes stay far below 2^24 pixels) and clamped so that every lane's
