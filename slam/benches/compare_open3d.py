@@ -1,8 +1,12 @@
 #!/usr/bin/env python3
 """Open3D VoxelBlockGrid and RGBD odometry on the same frames as `scarp map`, for the speed comparison.
 
-TSDF: same voxel size, truncation (4 voxels), block resolution (8) and depth range; ground-truth
-poses. Odometry (with --odometry-pairs N): Open3D's hybrid RGBD odometry (t.pipelines.odometry,
+TSDF: same voxel size, truncation (4 voxels, for block allocation as well as integration), block
+resolution (8), depth range and region of interest (--roi, as `scarp map --roi`: Open3D's unique
+block coordinates are filtered to the blocks intersecting the region inside the timer, as scarp
+filters them); ground-truth poses. With --scarp-map (scarp's map.json of the same sequence and
+settings) it prints scarp's figures beside Open3D's and the speed-up Open3D time / scarp time of
+integration (median, p90) and meshing. Odometry (with --odometry-pairs N): Open3D's hybrid RGBD odometry (t.pipelines.odometry,
 Method.Hybrid, 3 levels) on the first N consecutive frame pairs, initialised with the state
 estimate's relative motion as scarp is; its per-pair time and its ATE over those frames (chained,
 SE(3)-aligned like `scarp eval traj`) are printed next to scarp's figures read from a map.json
@@ -11,13 +15,15 @@ SE(3)-aligned like `scarp eval traj`) are printed next to scarp's figures read f
 Setup (Debian):  apt-get install libusb-1.0-0 libgomp1
                  pip install open3d-cpu==0.19.0   (0.20's CPU wheel gives empty TSDF meshes)
 Usage:           scarp render --path orbit --frames 120 --no-noise --out /tmp/orbit
-                 python3 slam/benches/compare_open3d.py /tmp/orbit --voxel 0.01 [--frames N]
                  scarp map /tmp/orbit --poses groundtruth --voxel 0.01 --out /tmp/map --json
+                 python3 slam/benches/compare_open3d.py /tmp/orbit --voxel 0.01 [--frames N] \
+                     [--max-depth 8] [--roi cyl:x,y,z0,z1,r] --scarp-map /tmp/map/map.json
                  python3 slam/benches/compare_open3d.py /tmp/orbit --frames 0 --odometry-pairs 30 \
                      --scarp-map /tmp/map_odometry/map.json
 
 Prints the median and p90 integration time per frame (block allocation + integration, as
-`integrate_ms_*` in scarp's map.json), the meshing time and the triangle count as JSON.
+`integrate_ms_*` in scarp's map.json), the meshing time (marching cubes, as scarp's
+`marching_cubes_ms`), the triangle and block counts as JSON.
 """
 
 import argparse
@@ -70,8 +76,14 @@ def main():
     parser.add_argument("--max-depth", type=float, default=10.0)
     parser.add_argument("--frames", type=int, default=0, help="0 = all (TSDF); -1 skips it")
     parser.add_argument("--odometry-pairs", type=int, default=0, help="frame pairs for odometry")
+    parser.add_argument("--roi", help="cyl:x,y,z_min,z_max,r or box:x0,y0,z0,x1,y1,z1 (metres)")
+    parser.add_argument(
+        "--weight-threshold", type=float, default=3.0,
+        help="Open3D meshing weight threshold (Open3D's default 3: voxels seen in < 3 frames)",
+    )
     parser.add_argument("--scarp-map", type=Path, help="scarp's map.json to print beside")
     args = parser.parse_args()
+    args.roi = parse_roi(args.roi) if args.roi else None
     result = {"open3d": o3d.__version__}
     if args.frames >= 0:
         result.update(compare_tsdf(args))
@@ -79,10 +91,46 @@ def main():
         result.update(compare_odometry(args))
     if args.scarp_map:
         ours = json.loads(args.scarp_map.read_text())
-        keys = ["integrate_ms_median", "integrate_ms_p90", "mesh_ms", "triangles",
+        keys = ["integrate_ms_median", "integrate_ms_p90", "mesh_ms", "marching_cubes_ms",
+                "triangles", "blocks",
                 "odometry_ms_median", "ate_rmse_m", "estimate_ate_rmse_m"]
         result["scarp"] = {k: ours[k] for k in keys if k in ours}
+        # Speed-up of scarp over Open3D (> 1: scarp is faster) for each time both report.
+        speedup = {}
+        for k in ["integrate_ms_median", "integrate_ms_p90", "mesh_ms", "odometry_ms_median"]:
+            # Open3D's meshing is marching cubes alone; scarp's mesh_ms adds its small-component
+            # filter, so the ratio uses scarp's marching_cubes_ms when map.json has it.
+            ours_key = "marching_cubes_ms" if k == "mesh_ms" and ours.get("marching_cubes_ms") else k
+            if ours_key in ours and k in result and ours[ours_key] > 0:
+                speedup[k] = result[k] / ours[ours_key]
+        result["open3d_over_scarp"] = speedup
     print(json.dumps(result, indent=2))
+
+
+def parse_roi(text):
+    """`cyl:x,y,z_min,z_max,r` or `box:x0,y0,z0,x1,y1,z1`, as `scarp map --roi`."""
+    kind, _, rest = text.partition(":")
+    values = [float(v) for v in rest.split(",")]
+    if kind == "cyl" and len(values) == 5:
+        return ("cyl", values)
+    if kind == "box" and len(values) == 6:
+        return ("box", values)
+    raise SystemExit(f"bad --roi {text!r}")
+
+
+def roi_mask(roi, coords, voxel):
+    """Which blocks (int array n×3 of block coordinates) intersect the region; the same test as
+    scarp's `Roi::intersects_box` on the block's extent [8·b − ½, 8·b + 7½) voxels."""
+    block = 8 * voxel
+    lo = coords.astype(np.float64) * block - 0.5 * voxel
+    hi = lo + block
+    kind, v = roi
+    if kind == "box":
+        return np.all((lo <= np.array(v[3:])) & (hi >= np.array(v[:3])), axis=1)
+    x, y, z0, z1, r = v
+    dx = np.maximum(lo[:, 0] - x, 0) + np.maximum(x - hi[:, 0], 0)
+    dy = np.maximum(lo[:, 1] - y, 0) + np.maximum(y - hi[:, 1], 0)
+    return (lo[:, 2] <= z1) & (hi[:, 2] >= z0) & (dx * dx + dy * dy <= r * r)
 
 
 def read_poses(path):
@@ -173,16 +221,21 @@ def compare_tsdf(args):
         c = o3d.t.io.read_image(str(seq / rgb[i][1])).to(device)
         extrinsic = o3c.Tensor(camera_from_world(*map(float, poses[i][1:8])), o3c.float64)
         start = time.perf_counter()
+        # Truncation 4 voxels for allocation too (Open3D's default allocates an 8-voxel band).
         blocks = vbg.compute_unique_block_coordinates(
-            d, intrinsic, extrinsic, cam["depth_scale"], args.max_depth
+            d, intrinsic, extrinsic, cam["depth_scale"], args.max_depth,
+            trunc_voxel_multiplier=4.0,
         )
+        if args.roi is not None:
+            keep = roi_mask(args.roi, blocks.numpy(), args.voxel)
+            blocks = o3c.Tensor(blocks.numpy()[keep])
         vbg.integrate(
             blocks, d, c, intrinsic, intrinsic, extrinsic, cam["depth_scale"], args.max_depth,
             trunc_voxel_multiplier=4.0,
         )
         times_ms.append((time.perf_counter() - start) * 1e3)
     start = time.perf_counter()
-    mesh = vbg.extract_triangle_mesh()
+    mesh = vbg.extract_triangle_mesh(weight_threshold=args.weight_threshold)
     mesh_ms = (time.perf_counter() - start) * 1e3
     times_ms.sort()
     return {
@@ -191,6 +244,7 @@ def compare_tsdf(args):
         "integrate_ms_p90": times_ms[min(len(times_ms) - 1, int(0.9 * (len(times_ms) - 1) + 0.5))],
         "mesh_ms": mesh_ms,
         "triangles": int(mesh.triangle.indices.shape[0]),
+        "blocks": int(vbg.hashmap().size()),
     }
 
 

@@ -17,7 +17,11 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::mesh::TriangleMesh;
-use crate::tsdf::{BLOCK_SIDE, BLOCK_VOXELS, BlockCoord, TsdfVolume, local_index};
+use std::collections::HashMap;
+
+use crate::tsdf::{
+    BLOCK_SIDE, BLOCK_VOXELS, BlockCoord, BuildBlockHasher, TsdfVolume, local_index,
+};
 
 pub use components::remove_small_components;
 pub use table::{CaseTable, EDGE_AXIS, EDGE_LOWER_CORNER, corner_offset};
@@ -53,19 +57,21 @@ fn gather_index(x: i32, y: i32, z: i32) -> usize {
     ((x + 1) + GATHER as i32 * ((y + 1) + GATHER as i32 * (z + 1))) as usize
 }
 
-/// A block's voxels plus a one-voxel border below and a two-voxel border above.
+/// A block's voxels plus a one-voxel border below and a two-voxel border above (on the stack:
+/// no allocation per block).
 struct Neighbourhood {
-    tsdf: Vec<f32>,
-    valid: Vec<bool>,
-    color: Vec<[u8; 3]>,
+    tsdf: [f32; GATHER_VOXELS],
+    valid: [bool; GATHER_VOXELS],
+    color: [[u8; 3]; GATHER_VOXELS],
 }
 
 impl Neighbourhood {
-    fn gather(volume: &TsdfVolume, coord: &BlockCoord, min_weight: f32) -> Self {
+    /// Gathers the neighbourhood of the block at `coord`; colours only with `with_color`.
+    fn gather(volume: &TsdfVolume, coord: &BlockCoord, min_weight: f32, with_color: bool) -> Self {
         let mut n = Self {
-            tsdf: vec![1.0; GATHER_VOXELS],
-            valid: vec![false; GATHER_VOXELS],
-            color: vec![[0; 3]; GATHER_VOXELS],
+            tsdf: [1.0; GATHER_VOXELS],
+            valid: [false; GATHER_VOXELS],
+            color: [[0; 3]; GATHER_VOXELS],
         };
         let side = BLOCK_SIDE as i32;
         for oz in -1..=1i32 {
@@ -90,7 +96,9 @@ impl Neighbourhood {
                                 let w = block.weight[src];
                                 n.valid[dst] = w > 0.0 && w > min_weight;
                                 n.tsdf[dst] = block.tsdf[src];
-                                n.color[dst] = block.color[src];
+                                if with_color {
+                                    n.color[dst] = block.color[src];
+                                }
                             }
                         }
                     }
@@ -138,17 +146,22 @@ pub fn extract_mesh(volume: &TsdfVolume, config: &MeshingConfig) -> TriangleMesh
     let coords = volume.block_coords();
     let voxel = volume.config().voxel_size_m;
     let side = BLOCK_SIDE as i32;
+    let active = active_blocks(volume, config.min_weight);
     // Phase 1: each block's own edge vertices.
     let per_block: Vec<BlockVertices> = coords
         .par_iter()
-        .map(|coord| {
-            let n = Neighbourhood::gather(volume, coord, config.min_weight);
+        .zip(&active)
+        .map(|(coord, &active)| {
             let mut out = BlockVertices {
                 keys: Vec::new(),
                 positions: Vec::new(),
                 normals: Vec::new(),
                 colors: Vec::new(),
             };
+            if !active {
+                return out;
+            }
+            let n = Neighbourhood::gather(volume, coord, config.min_weight, true);
             for z in 0..side {
                 for y in 0..side {
                     for x in 0..side {
@@ -204,10 +217,18 @@ pub fn extract_mesh(volume: &TsdfVolume, config: &MeshingConfig) -> TriangleMesh
         total += b.keys.len();
     }
     // Phase 3: triangles of the cells whose lower corner lies in each block.
-    let faces_per_block: Vec<Vec<[u32; 3]>> = coords
+    // Each block's triangles, and which of them lie in a cube face (the only ones that can
+    // coincide with another cell's triangle, see [`remove_coincident_face_pairs`]).
+    let faces_per_block: Vec<(Vec<[u32; 3]>, Vec<u32>)> = coords
         .par_iter()
-        .map(|coord| {
-            let n = Neighbourhood::gather(volume, coord, config.min_weight);
+        .zip(&active)
+        .map(|(coord, &active)| {
+            let mut faces = Vec::new();
+            let mut in_cube_face = Vec::new();
+            if !active {
+                return (faces, in_cube_face);
+            }
+            let n = Neighbourhood::gather(volume, coord, config.min_weight, false);
             // Owner blocks of edges: this block and its +x/+y/+z neighbours.
             let owners: [Option<usize>; 8] = std::array::from_fn(|c| {
                 let o = corner_offset(c);
@@ -217,7 +238,6 @@ pub fn extract_mesh(volume: &TsdfVolume, config: &MeshingConfig) -> TriangleMesh
                     coord[2] + o[2] as i32,
                 ])
             });
-            let mut faces = Vec::new();
             for z in 0..side {
                 for y in 0..side {
                     for x in 0..side {
@@ -261,19 +281,32 @@ pub fn extract_mesh(volume: &TsdfVolume, config: &MeshingConfig) -> TriangleMesh
                                 // Vertex counts stay below u32::MAX (TriangleMesh uses u32 ids).
                                 ids[slot] = (offsets[owner] + k) as u32;
                             }
+                            let [a, b, c] = tri.map(|e| EDGE_FACES[e as usize]);
+                            if a & b & c != 0 {
+                                // Face counts stay below u32::MAX like vertex counts.
+                                in_cube_face.push(faces.len() as u32);
+                            }
                             faces.push(ids);
                         }
                     }
                 }
             }
-            faces
+            (faces, in_cube_face)
         })
         .collect();
+    let face_total = faces_per_block.iter().map(|(f, _)| f.len()).sum();
+    let mut faces = Vec::with_capacity(face_total);
+    let mut candidates = Vec::new();
+    for (block_faces, in_cube_face) in faces_per_block {
+        let offset = faces.len();
+        candidates.extend(in_cube_face.iter().map(|&i| offset + i as usize));
+        faces.extend(block_faces);
+    }
     let mut mesh = TriangleMesh {
         positions: Vec::with_capacity(total),
         normals: Vec::with_capacity(total),
         colors: Vec::with_capacity(total),
-        faces: faces_per_block.concat(),
+        faces,
     };
     for b in per_block {
         mesh.positions.extend(b.positions);
@@ -281,8 +314,79 @@ pub fn extract_mesh(volume: &TsdfVolume, config: &MeshingConfig) -> TriangleMesh
         mesh.colors.extend(b.colors);
     }
     debug_assert!(BLOCK_VOXELS * 3 <= usize::from(u16::MAX));
-    remove_coincident_face_pairs(&mut mesh.faces);
+    remove_coincident_pairs_among(&mut mesh.faces, &candidates);
+    if config.min_component_triangles == 0 {
+        // Nothing to drop: skip the component pass and its copy.
+        return mesh;
+    }
     remove_small_components(&mesh, config.min_component_triangles)
+}
+
+/// Per cube-edge bit set of the cube faces containing it: bit 2·a + o for the face normal to
+/// axis a at offset o ∈ {0, 1}. Three edges lie in one face when their sets intersect.
+const EDGE_FACES: [u8; 12] = {
+    let mut out = [0u8; 12];
+    let mut e = 0;
+    while e < 12 {
+        let axis = EDGE_AXIS[e];
+        let o = corner_offset(EDGE_LOWER_CORNER[e]);
+        let mut b = 0;
+        while b < 3 {
+            if b != axis {
+                out[e] |= 1 << (2 * b + o[b]);
+            }
+            b += 1;
+        }
+        e += 1;
+    }
+    out
+};
+
+/// Per stored block: whether any cell or edge it owns can cross the surface, i.e. whether the
+/// observed voxels of the block and its seven upper neighbours (+x, +y, +z and their
+/// combinations, which its cells reach) include both signs. Free-space blocks (all TSDF
+/// positive) and blocks behind surfaces are skipped without gathering anything.
+fn active_blocks(volume: &TsdfVolume, min_weight: f32) -> Vec<bool> {
+    const NEGATIVE: u8 = 1;
+    const POSITIVE: u8 = 2;
+    let signs: Vec<u8> = volume
+        .blocks()
+        .par_iter()
+        .map(|b| {
+            let mut s = 0;
+            for (&t, &w) in b.tsdf.iter().zip(b.weight.iter()) {
+                if w > 0.0 && w > min_weight {
+                    s |= if t < 0.0 { NEGATIVE } else { POSITIVE };
+                }
+            }
+            s
+        })
+        .collect();
+    volume
+        .block_coords()
+        .par_iter()
+        .zip(&signs)
+        .map(|(coord, &own)| {
+            // Every edge and cell of a block starts at one of its own observed voxels.
+            if own == 0 {
+                return false;
+            }
+            let mut s = own;
+            for c in 1..8 {
+                if s == NEGATIVE | POSITIVE {
+                    break;
+                }
+                let o = corner_offset(c);
+                let nb = [
+                    coord[0] + o[0] as i32,
+                    coord[1] + o[1] as i32,
+                    coord[2] + o[2] as i32,
+                ];
+                s |= volume.block_index(&nb).map_or(0, |i| signs[i]);
+            }
+            s == NEGATIVE | POSITIVE
+        })
+        .collect()
 }
 
 /// Removes triangles that share all three vertices with another triangle, in pairs.
@@ -292,24 +396,43 @@ pub fn extract_mesh(volume: &TsdfVolume, config: &MeshingConfig) -> TriangleMesh
 /// four triangles, which makes the mesh non-manifold (and breaks the closing and the mass
 /// properties of fragility analysis). The pair adds nothing to the surface, so both go.
 pub fn remove_coincident_face_pairs(faces: &mut Vec<[u32; 3]>) {
-    let mut seen: std::collections::HashMap<[u32; 3], usize> =
-        std::collections::HashMap::with_capacity(faces.len());
-    let mut drop = vec![false; faces.len()];
-    for (i, f) in faces.iter().enumerate() {
-        let mut key = *f;
+    let all: Vec<usize> = (0..faces.len()).collect();
+    remove_coincident_pairs_among(faces, &all);
+}
+
+/// [`remove_coincident_face_pairs`] restricted to the faces at `candidates` (indices into
+/// `faces`, increasing): marching cubes only needs to check triangles lying in a cube face.
+fn remove_coincident_pairs_among(faces: &mut Vec<[u32; 3]>, candidates: &[usize]) {
+    let mut seen: HashMap<[u32; 3], usize, BuildBlockHasher> =
+        HashMap::with_capacity_and_hasher(candidates.len(), BuildBlockHasher::default());
+    let mut drop = Vec::new();
+    for &i in candidates {
+        let mut key = faces[i];
         key.sort_unstable();
         match seen.remove(&key) {
             Some(j) => {
-                drop[i] = true;
-                drop[j] = true;
+                drop.push(i);
+                drop.push(j);
             }
             None => {
                 seen.insert(key, i);
             }
         }
     }
-    let mut keep = drop.iter().map(|d| !d);
-    faces.retain(|_| keep.next().unwrap_or(true));
+    if drop.is_empty() {
+        return;
+    }
+    drop.sort_unstable();
+    let mut next = drop.iter().peekable();
+    let mut index = 0;
+    faces.retain(|_| {
+        let keep = next.peek() != Some(&&index);
+        if !keep {
+            next.next();
+        }
+        index += 1;
+        keep
+    });
 }
 
 #[cfg(test)]

@@ -1,17 +1,23 @@
-//! Projective integration of one RGBD frame: allocate the blocks the truncation band touches,
-//! then update every voxel of those blocks in parallel.
-
-use std::collections::HashSet;
+//! Projective integration of one RGBD frame: find the blocks the truncation band touches,
+//! allocate the new ones, then update every voxel of those blocks in parallel.
+//!
+//! Block finding walks each pixel's truncation band through the block grid (exact: no block the
+//! band crosses is skipped) and collects packed block keys per tile of rows; consecutive pixels
+//! mostly hit the blocks their neighbours hit, so a tiny cache of recent keys removes most
+//! repeats before the per-tile sort and the final sort + deduplication. Nothing is hashed per
+//! pixel: the hash map is only consulted once per distinct block. The sorted keys make the
+//! allocation order, and so the whole result, independent of the thread count.
 
 use nalgebra::{Isometry3, Matrix3, Vector3};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+use wide::f32x8;
 
-use super::{BLOCK_SIDE, Block, BlockCoord, BuildBlockHasher, TsdfError, TsdfVolume, local_index};
+use super::{BLOCK_SIDE, Block, BlockCoord, TsdfError, TsdfVolume};
 use crate::frame::RgbdFrame;
 use crate::geometry::floor_i32;
 use crate::geometry::{PinholeCamera, check_finite_isometry};
-use crate::image::{DepthImage, RgbImage};
+use crate::image::RgbImage;
 
 /// What one integration did.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -22,8 +28,53 @@ pub struct IntegrationStats {
     pub blocks_allocated: usize,
 }
 
-/// Rows of the depth image handled by one allocation task.
-const ALLOCATION_ROWS: usize = 16;
+/// Rows of the depth image handled by one block-finding task (a multiple of nothing in
+/// particular: small enough to balance two to eight threads, large enough that the per-task
+/// sort runs over many repeats).
+const ALLOCATION_ROWS: usize = 8;
+
+/// Bits per axis of a packed block key; block coordinates must lie in ±2^20 (±84 km at 1 cm
+/// voxels, far beyond any mapped site).
+const KEY_BITS: u32 = 21;
+const KEY_OFFSET: i32 = 1 << (KEY_BITS - 1);
+const KEY_MASK: u64 = (1 << KEY_BITS) - 1;
+
+/// Packs a block coordinate into a `u64` whose order is the lexicographic order of (x, y, z);
+/// `None` outside the representable range.
+#[inline]
+fn pack(b: BlockCoord) -> Option<u64> {
+    let mut key = 0u64;
+    for c in b {
+        let shifted = c.checked_add(KEY_OFFSET)?;
+        if !(0..(1 << KEY_BITS)).contains(&shifted) {
+            return None;
+        }
+        key = (key << KEY_BITS) | shifted as u64;
+    }
+    Some(key)
+}
+
+/// Inverse of [`pack`].
+#[inline]
+fn unpack(key: u64) -> BlockCoord {
+    let axis = |shift: u32| ((key >> shift) & KEY_MASK) as i32 - KEY_OFFSET;
+    [axis(2 * KEY_BITS), axis(KEY_BITS), axis(0)]
+}
+
+/// Reusable per-volume buffers of the integration, so a frame allocates nothing once the
+/// volume has seen a few frames.
+#[derive(Debug, Clone, Default)]
+pub(super) struct Scratch {
+    /// Packed keys of the blocks each row tile touches and the number of pixels whose band
+    /// crosses each (sorted, unique after the tile pass).
+    tiles: Vec<Vec<(u64, u32)>>,
+    /// All touched keys and their pixel counts, sorted and unique.
+    keys: Vec<(u64, u32)>,
+    /// Storage index of each touched block (`u32::MAX` while unallocated).
+    indices: Vec<u32>,
+    /// Per stored block: updated by this frame.
+    update: Vec<bool>,
+}
 
 /// A rigid transform in f32 for the per-voxel inner loops.
 #[derive(Debug, Clone, Copy)]
@@ -72,53 +123,76 @@ pub(super) fn integrate(
             camera_height: camera.height,
         });
     }
-    let touched = touched_blocks(volume, &frame.depth_m, camera, world_from_camera);
+    let mut scratch = std::mem::take(&mut volume.scratch);
+    touched_blocks(volume, &mut scratch, frame, camera, world_from_camera);
+    // Look the touched blocks up in parallel (read-only), then allocate the missing ones with
+    // enough support serially in key order, which keeps storage order independent of the
+    // thread count.
+    let index = &volume.index;
+    scratch.indices.clear();
+    scratch.indices.par_extend(
+        scratch
+            .keys
+            .par_iter()
+            .map(|&(k, _)| index.get(&unpack(k)).copied().unwrap_or(u32::MAX)),
+    );
+    let min_support = volume.config.min_block_support;
     let mut allocated = 0;
-    let mut update = vec![false; volume.blocks.len() + touched.len()];
-    for coord in &touched {
-        let index = match volume.index.get(coord) {
-            Some(&i) => i as usize,
-            None => {
-                let i = volume.blocks.len();
-                // Block counts stay far below u32::MAX (that would be 20 TB of voxels).
-                volume.index.insert(*coord, i as u32);
-                volume.coords.push(*coord);
-                volume.blocks.push(Block::new());
-                allocated += 1;
-                i
-            }
-        };
-        update[index] = true;
+    for (slot, &(key, support)) in scratch.indices.iter_mut().zip(&scratch.keys) {
+        if *slot == u32::MAX && support >= min_support {
+            let coord = unpack(key);
+            // Block counts stay far below u32::MAX (that would be 20 TB of voxels).
+            let i = volume.blocks.len() as u32;
+            volume.index.insert(coord, i);
+            volume.coords.push(coord);
+            volume.blocks.push(Block::new());
+            allocated += 1;
+            *slot = i;
+        }
     }
-    update.truncate(volume.blocks.len());
+    scratch.update.clear();
+    scratch.update.resize(volume.blocks.len(), false);
+    let mut updated = 0;
+    for &i in &scratch.indices {
+        if let Some(u) = scratch.update.get_mut(i as usize) {
+            *u = true;
+            updated += 1;
+        }
+    }
     let kernel = Kernel::new(&volume.config, camera, world_from_camera);
-    let depth = &frame.depth_m;
+    let depth = frame.depth_m.as_slice();
     let rgb = &frame.rgb;
     volume
         .blocks
         .par_iter_mut()
         .zip(volume.coords.par_iter())
-        .zip(update.par_iter())
+        .zip(scratch.update.par_iter())
         .filter(|(_, u)| **u)
         .for_each(|((block, coord), _)| kernel.update_block(block, coord, depth, rgb));
-    Ok(IntegrationStats {
-        blocks_updated: touched.len(),
+    let stats = IntegrationStats {
+        blocks_updated: updated,
         blocks_allocated: allocated,
-    })
+    };
+    volume.scratch = scratch;
+    Ok(stats)
 }
 
-/// Blocks (sorted) that the truncation band around the measured depths touches, inside the ROI.
+/// Fills `scratch.keys` with the packed keys (sorted, unique) of the blocks that the truncation
+/// band around the measured depths touches inside the ROI, each with the number of pixels
+/// whose band crosses it.
 fn touched_blocks(
     volume: &TsdfVolume,
-    depth: &DepthImage,
+    scratch: &mut Scratch,
+    frame: &RgbdFrame,
     camera: &PinholeCamera,
     world_from_camera: &Isometry3<f64>,
-) -> Vec<BlockCoord> {
+) {
     let config = &volume.config;
+    let depth = &frame.depth_m;
     let truncation = config.truncation_m();
     let inv_block = 1.0 / config.block_size_m();
-    let half_voxel = 0.5 * config.voxel_size_m;
-    let block_size_f64 = f64::from(config.block_size_m());
+    let block_size = f64::from(config.block_size_m());
+    let voxel = f64::from(config.voxel_size_m);
     let transform = RigidF32::from_isometry(world_from_camera);
     let (fx, fy, cx, cy) = (
         camera.fx as f32,
@@ -126,77 +200,96 @@ fn touched_blocks(
         camera.cx as f32,
         camera.cy as f32,
     );
+    // Everything in block units. Voxel centres sit at integer multiples of the voxel size, so
+    // block b covers [8·b − ½, 8·b + 7½) voxels: shift by half a voxel before flooring.
+    let r = transform.rotation * inv_block;
+    let origin = (transform.translation.add_scalar(0.5 * config.voxel_size_m)) * inv_block;
+    let step_u = r.column(0) / fx;
     let width = depth.width() as usize;
     let height = depth.height() as usize;
     let data = depth.as_slice();
-    let chunks: Vec<HashSet<BlockCoord, BuildBlockHasher>> = (0..height.div_ceil(ALLOCATION_ROWS))
-        .into_par_iter()
-        .map(|chunk| {
-            let mut set = HashSet::with_hasher(BuildBlockHasher::default());
-            // The last few blocks inserted: neighbouring pixels mostly touch the same blocks.
-            let mut recent = [[i32::MIN; 3]; 8];
+    let tiles = height.div_ceil(ALLOCATION_ROWS);
+    scratch.tiles.resize_with(tiles, Vec::new);
+    let in_roi = |b: BlockCoord| match &config.roi {
+        None => true,
+        Some(roi) => {
+            let lo = [0, 1, 2].map(|a| f64::from(b[a]) * block_size - 0.5 * voxel);
+            let hi = [0, 1, 2].map(|a| lo[a] + block_size);
+            roi.intersects_box(lo, hi)
+        }
+    };
+    scratch
+        .tiles
+        .par_iter_mut()
+        .enumerate()
+        .for_each(|(tile, keys)| {
+            keys.clear();
+            // The last few blocks seen (inside the ROI or not) and how many pixels' bands
+            // crossed each since it entered: neighbouring pixels mostly touch the same blocks,
+            // so only a cache miss pays for the ROI test and a push.
+            let mut recent = [(u64::MAX, 0u32); 4];
             let mut slot = 0;
-            for v in chunk * ALLOCATION_ROWS..((chunk + 1) * ALLOCATION_ROWS).min(height) {
-                for u in 0..width {
-                    let d = data[v * width + u];
-                    if !(d >= config.min_depth_m && d <= config.max_depth_m) {
-                        continue;
+            let mut visit = |b: BlockCoord| {
+                let Some(key) = pack(b) else { return };
+                if let Some(entry) = recent.iter_mut().find(|(k, _)| *k == key) {
+                    // Blocks outside the ROI stay at 0 and are never pushed.
+                    entry.1 += u32::from(entry.1 > 0);
+                    return;
+                }
+                let (old, count) = recent[slot];
+                if count > 0 {
+                    keys.push((old, count));
+                }
+                recent[slot] = if in_roi(b) { (key, 1) } else { (key, 0) };
+                slot = (slot + 1) % recent.len();
+            };
+            for v in tile * ALLOCATION_ROWS..((tile + 1) * ALLOCATION_ROWS).min(height) {
+                // Viewing ray of pixel (u, v) at unit camera depth, world axes, block units;
+                // stepped along the row.
+                let mut ray = r * Vector3::new(-cx / fx, (v as f32 - cy) / fy, 1.0);
+                for &d in &data[v * width..(v + 1) * width] {
+                    if d >= config.min_depth_m && d <= config.max_depth_m {
+                        let a = origin + ray * (d - truncation);
+                        let b = origin + ray * (d + truncation);
+                        walk_blocks(&a, &b, &mut visit);
                     }
-                    let ray = Vector3::new((u as f32 - cx) / fx, (v as f32 - cy) / fy, 1.0);
-                    let near = transform.apply(&(ray * (d - truncation)));
-                    let far = transform.apply(&(ray * (d + truncation)));
-                    if let Some(roi) = &config.roi {
-                        // Conservative pre-test (one block of margin); blocks are tested exactly
-                        // below.
-                        let lo = [0, 1, 2].map(|a| f64::from(near[a].min(far[a])) - block_size_f64);
-                        let hi = [0, 1, 2].map(|a| f64::from(near[a].max(far[a])) + block_size_f64);
-                        if !roi.intersects_box(lo, hi) {
-                            continue;
-                        }
-                    }
-                    // Voxel centres sit at integer multiples of the voxel size, so block b
-                    // covers [8·b − ½, 8·b + 7½) voxels.
-                    let a = (near.add_scalar(half_voxel)) * inv_block;
-                    let b = (far.add_scalar(half_voxel)) * inv_block;
-                    walk_blocks(&a, &b, |block| {
-                        if !recent.contains(&block) {
-                            recent[slot] = block;
-                            slot = (slot + 1) % recent.len();
-                            set.insert(block);
-                        }
-                    });
+                    ray += step_u;
                 }
             }
-            set
-        })
-        .collect();
-    let mut all: HashSet<BlockCoord, BuildBlockHasher> =
-        HashSet::with_hasher(BuildBlockHasher::default());
-    for set in chunks {
-        all.extend(set);
+            keys.extend(recent.iter().copied().filter(|&(_, count)| count > 0));
+            merge_counts(keys);
+        });
+    scratch.keys.clear();
+    for tile in &scratch.tiles {
+        scratch.keys.extend_from_slice(tile);
     }
-    let block_size = f64::from(config.block_size_m());
-    let voxel = f64::from(config.voxel_size_m);
-    let mut out: Vec<BlockCoord> = all
-        .into_iter()
-        .filter(|b| match &config.roi {
-            None => true,
-            Some(roi) => {
-                let lo = [0, 1, 2].map(|a| f64::from(b[a]) * block_size - 0.5 * voxel);
-                let hi = [0, 1, 2].map(|a| lo[a] + block_size);
-                roi.intersects_box(lo, hi)
-            }
-        })
-        .collect();
-    out.sort_unstable();
-    out
+    merge_counts(&mut scratch.keys);
+}
+
+/// Sorts `(key, count)` pairs by key and sums the counts of equal keys.
+fn merge_counts(keys: &mut Vec<(u64, u32)>) {
+    keys.par_sort_unstable_by_key(|&(k, _)| k);
+    keys.dedup_by(|next, kept| {
+        if next.0 == kept.0 {
+            kept.1 += next.1;
+            true
+        } else {
+            false
+        }
+    });
 }
 
 /// Visits every grid cell the segment from `a` to `b` (grid units) passes through, in order
 /// (Amanatides–Woo traversal), so no block along the truncation band is skipped.
+#[inline]
 fn walk_blocks(a: &Vector3<f32>, b: &Vector3<f32>, mut visit: impl FnMut(BlockCoord)) {
     let mut cell = [floor_i32(a.x), floor_i32(a.y), floor_i32(a.z)];
     let end = [floor_i32(b.x), floor_i32(b.y), floor_i32(b.z)];
+    visit(cell);
+    if cell == end {
+        // The usual case: the whole band lies in one block.
+        return;
+    }
     let dir = b - a;
     let mut step = [0i32; 3];
     let mut t_max = [f32::INFINITY; 3];
@@ -212,7 +305,6 @@ fn walk_blocks(a: &Vector3<f32>, b: &Vector3<f32>, mut visit: impl FnMut(BlockCo
             t_max[i] = (a[i] - cell[i] as f32) / -dir[i];
         }
     }
-    visit(cell);
     let max_steps = (0..3)
         .map(|i| (end[i] - cell[i]).unsigned_abs())
         .sum::<u32>();
@@ -233,6 +325,13 @@ fn walk_blocks(a: &Vector3<f32>, b: &Vector3<f32>, mut visit: impl FnMut(BlockCo
     }
 }
 
+/// Lane-wise floor of non-negative values below 2^31 (truncation toward zero is the floor
+/// there), without the libm call `f32::floor` becomes on baseline x86-64.
+#[inline(always)]
+fn floor_small(x: f32x8) -> f32x8 {
+    x.fast_trunc_int().round_float()
+}
+
 /// Everything the per-voxel update needs, in f32.
 struct Kernel {
     camera_from_world: RigidF32,
@@ -241,7 +340,14 @@ struct Kernel {
     cx: f32,
     cy: f32,
     width: usize,
-    height: usize,
+    /// Projections (u, v) in [−½, `u_max`) × [−½, `v_max`) fall on a pixel: `width − ½`,
+    /// `height − ½`.
+    u_max: f32,
+    v_max: f32,
+    /// The largest u (v) with a pixel to its right (below), just under `width − 1`
+    /// (`height − 1`): projections on the outer half of a border pixel are clamped to it.
+    u_last: f32,
+    v_last: f32,
     voxel_size_m: f32,
     truncation_m: f32,
     max_weight: f32,
@@ -262,7 +368,13 @@ impl Kernel {
             cx: camera.cx as f32,
             cy: camera.cy as f32,
             width: camera.width as usize,
-            height: camera.height as usize,
+            u_max: camera.width as f32 - 0.5,
+            v_max: camera.height as f32 - 0.5,
+            // 1/1024 pixel short of the last column (row): the bilinear weight of the pixel
+            // beyond is then 0.999, a depth error under 0.001 of the (agreeing, < ½ truncation)
+            // neighbour difference.
+            u_last: camera.width as f32 - 1.0 - 1.0 / 1024.0,
+            v_last: camera.height as f32 - 1.0 - 1.0 / 1024.0,
             voxel_size_m: config.voxel_size_m,
             truncation_m: config.truncation_m(),
             max_weight: config.max_weight,
@@ -271,98 +383,156 @@ impl Kernel {
         }
     }
 
-    /// Depth at sub-pixel (u, v): bilinear when the four neighbours are measured and agree
-    /// within half the truncation distance, otherwise the nearest pixel. Also returns the
-    /// nearest pixel's index for colour. `None` outside the image or without a measurement.
-    #[inline]
-    fn sample_depth(&self, depth: &[f32], u: f32, v: f32) -> Option<(f32, usize)> {
-        if !(u >= -0.5 && v >= -0.5 && u < self.width as f32 - 0.5 && v < self.height as f32 - 0.5)
-        {
-            return None;
-        }
-        let nu = (u + 0.5) as usize;
-        let nv = (v + 0.5) as usize;
-        let nearest = nv * self.width + nu;
-        // Truncation is the floor for non-negative values, and avoids the libm call that
-        // `f32::floor` becomes on baseline x86-64 (it was a large share of integration time).
-        if u >= 0.0 && v >= 0.0 && (u as usize) + 1 < self.width && (v as usize) + 1 < self.height {
-            let (u0, v0) = ((u as usize) as f32, (v as usize) as f32);
-            let i = v as usize * self.width + u as usize;
-            let d = [
-                depth[i],
-                depth[i + 1],
-                depth[i + self.width],
-                depth[i + self.width + 1],
-            ];
-            let lo = d.iter().copied().fold(f32::INFINITY, f32::min);
-            let hi = d.iter().copied().fold(0.0f32, f32::max);
-            if lo > 0.0 && hi - lo < 0.5 * self.truncation_m {
-                let fu = u - u0;
-                let fv = v - v0;
-                let top = d[0] + (d[1] - d[0]) * fu;
-                let bottom = d[2] + (d[3] - d[2]) * fu;
-                return Some((top + (bottom - top) * fv, nearest));
-            }
-        }
-        let d = depth[nearest];
-        (d > 0.0).then_some((d, nearest))
-    }
-
-    fn update_block(
-        &self,
-        block: &mut Block,
-        coord: &BlockCoord,
-        depth: &DepthImage,
-        rgb: &RgbImage,
-    ) {
-        let depth = depth.as_slice();
+    /// Updates every voxel of `block` (at block coordinate `coord`) that projects into the image
+    /// in front of, or less than the truncation distance behind, the measured depth.
+    ///
+    /// Depth is sampled at the voxel's sub-pixel projection (u, v) (pixel centres at integers;
+    /// projections within half a pixel outside the outer centres are clamped onto them):
+    /// bilinear when the four neighbouring pixels are measured and agree
+    /// within half the truncation distance, otherwise the nearest of them (none when that one is
+    /// unmeasured). Colour comes from the nearest pixel. Observations weigh 1/z².
+    ///
+    /// Each row of eight voxels (along x) is one set of eight SIMD lanes: projection, depth
+    /// interpolation and the TSDF and weight update are lane-wise and branch-free; only the
+    /// pixel loads and the colour blend go voxel by voxel.
+    fn update_block(&self, block: &mut Block, coord: &BlockCoord, depth: &[f32], rgb: &RgbImage) {
+        const N: usize = BLOCK_SIDE;
         let rgb = rgb.as_slice();
+        let w = self.width;
         let s = self.voxel_size_m;
         let side = BLOCK_SIDE as i32;
         let r = &self.camera_from_world.rotation;
-        let step_x = r.column(0) * s;
-        let inv_truncation = 1.0 / self.truncation_m;
-        for z in 0..BLOCK_SIDE {
-            for y in 0..BLOCK_SIDE {
-                let origin = Vector3::new(
-                    (coord[0] * side) as f32 * s,
-                    (coord[1] * side + y as i32) as f32 * s,
-                    (coord[2] * side + z as i32) as f32 * s,
+        let (step_x, step_y, step_z) = (r.column(0) * s, r.column(1) * s, r.column(2) * s);
+        let origin = self.camera_from_world.apply(&Vector3::new(
+            (coord[0] * side) as f32 * s,
+            (coord[1] * side) as f32 * s,
+            (coord[2] * side) as f32 * s,
+        ));
+        let lane = f32x8::new([0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0]);
+        let (sx, sy, sz) = (lane * step_x.x, lane * step_x.y, lane * step_x.z);
+        let splat = f32x8::splat;
+        let (fx, fy, cx, cy) = (
+            splat(self.fx),
+            splat(self.fy),
+            splat(self.cx),
+            splat(self.cy),
+        );
+        let (zero, one, half) = (splat(0.0), splat(1.0), splat(0.5));
+        let (min_depth, max_depth) = (splat(self.min_depth_m), splat(self.max_depth_m));
+        let (u_max, v_max) = (splat(self.u_max), splat(self.v_max));
+        let (u_last, v_last) = (splat(self.u_last), splat(self.v_last));
+        let neg_half = splat(-0.5);
+        let neg_truncation = splat(-self.truncation_m);
+        let inv_truncation = splat(1.0 / self.truncation_m);
+        let agree = splat(0.5 * self.truncation_m);
+        let max_weight = splat(self.max_weight);
+        // The last index whose 2×2 neighbourhood lies inside the depth image.
+        let last_quad = splat(depth.len().saturating_sub(w + 2) as f32);
+        let Block {
+            tsdf,
+            weight,
+            color,
+        } = block;
+        for z in 0..N {
+            for y in 0..N {
+                let row = origin + step_y * y as f32 + step_z * z as f32;
+                let zc = splat(row.z) + sz;
+                let inv_z = one / zc;
+                let u = fx * (splat(row.x) + sx) * inv_z + cx;
+                let v = fy * (splat(row.y) + sy) * inv_z + cy;
+                let inside = zc.simd_ge(min_depth)
+                    & u.simd_ge(neg_half)
+                    & v.simd_ge(neg_half)
+                    & u.simd_lt(u_max)
+                    & v.simd_lt(v_max);
+                if inside.to_bitmask() == 0 {
+                    continue;
+                }
+                // Projections on the outer half of a border pixel are clamped onto that pixel
+                // (the sample is then that pixel's depth, as the nearest-pixel rule gives).
+                // Clamped, 0 ≤ u, v < 2^31, so truncation is the floor (neither the libm
+                // `floor` call nor a saturating conversion); outside lanes read pixel (0, 0).
+                let u = inside.select(u.fast_max(zero).fast_min(u_last), zero);
+                let v = inside.select(v.fast_max(zero).fast_min(v_last), zero);
+                let (fu, fv) = (u - floor_small(u), v - floor_small(v));
+                // Index of the top-left pixel of the 2×2 neighbourhood, computed in f32 (exact:
+                // image sizes stay far below 2^24 pixels) and clamped so that every lane's
+                // neighbourhood lies in the image.
+                let quad = (v - fv) * splat(w as f32) + (u - fu);
+                let quad = quad.fast_min(last_quad).fast_trunc_int().to_array();
+                // Pixel loads (a gather: one voxel at a time).
+                let (mut d00, mut d01, mut d10, mut d11) =
+                    ([0.0f32; N], [0.0; N], [0.0; N], [0.0; N]);
+                for x in 0..N {
+                    let q = quad[x] as usize;
+                    let p = &depth[q..q + w + 2];
+                    (d00[x], d01[x], d10[x], d11[x]) = (p[0], p[1], p[w], p[w + 1]);
+                }
+                let (d00, d01, d10, d11) = (
+                    f32x8::new(d00),
+                    f32x8::new(d01),
+                    f32x8::new(d10),
+                    f32x8::new(d11),
                 );
-                let row_start = self.camera_from_world.apply(&origin);
-                for x in 0..BLOCK_SIDE {
-                    let p = row_start + step_x * x as f32;
-                    if p.z < self.min_depth_m {
+                let right = fu.simd_ge(half);
+                let below = fv.simd_ge(half);
+                let near = below.select(right.select(d11, d10), right.select(d01, d00));
+                // Depths are never NaN, so the fast (NaN-unaware) min and max are exact.
+                let lo = d00.fast_min(d01).fast_min(d10.fast_min(d11));
+                let hi = d00.fast_max(d01).fast_max(d10.fast_max(d11));
+                let top = d00 + (d01 - d00) * fu;
+                let bottom = d10 + (d11 - d10) * fu;
+                let bilinear = top + (bottom - top) * fv;
+                let sample = (lo.simd_gt(zero) & (hi - lo).simd_lt(agree)).select(bilinear, near);
+                let sdf = sample - zc;
+                let observed = inside
+                    & sample.simd_ge(min_depth)
+                    & sample.simd_le(max_depth)
+                    & sdf.simd_ge(neg_truncation);
+                let mask = observed.to_bitmask();
+                if mask == 0 {
+                    continue;
+                }
+                let t_obs = (sdf * inv_truncation).fast_min(one);
+                let w_obs = observed.select(inv_z * inv_z, zero);
+                let base = N * (y + N * z);
+                let tsdf_row: &mut [f32; N] = (&mut tsdf[base..base + N])
+                    .try_into()
+                    .expect("a block row holds eight voxels");
+                let weight_row: &mut [f32; N] = (&mut weight[base..base + N])
+                    .try_into()
+                    .expect("a block row holds eight voxels");
+                let t_old = f32x8::new(*tsdf_row);
+                let w_old = f32x8::new(*weight_row);
+                let w_sum = w_old + w_obs;
+                // One division for the TSDF and the colour; unobserved lanes keep their values
+                // (their 0/0 never reaches the result).
+                let inv_sum = observed.select(one / w_sum, zero);
+                let share = w_obs * inv_sum;
+                let blended = t_old * (w_old * inv_sum) + t_obs * share;
+                *tsdf_row = observed.select(blended, t_old).to_array();
+                *weight_row = w_sum.fast_min(max_weight).to_array();
+                let share = share.to_array();
+                let (right, below) = (right.to_bitmask(), below.to_bitmask());
+                for x in 0..N {
+                    if mask & (1 << x) == 0 {
                         continue;
                     }
-                    let inv_z = 1.0 / p.z;
-                    let u = self.fx * p.x * inv_z + self.cx;
-                    let v = self.fy * p.y * inv_z + self.cy;
-                    let Some((d, pixel)) = self.sample_depth(depth, u, v) else {
-                        continue;
-                    };
-                    if d < self.min_depth_m || d > self.max_depth_m {
-                        continue;
-                    }
-                    let sdf = d - p.z;
-                    if sdf < -self.truncation_m {
-                        continue;
-                    }
-                    let tsdf = (sdf * inv_truncation).min(1.0);
-                    let w_obs = inv_z * inv_z;
-                    let i = local_index(x, y, z);
-                    let w_old = block.weight[i];
-                    let w_sum = w_old + w_obs;
-                    block.tsdf[i] = (block.tsdf[i] * w_old + tsdf * w_obs) / w_sum;
-                    let c_old = block.color[i];
-                    let c_obs = rgb[pixel];
-                    // Adding 0.5 and truncating rounds these non-negative values without the
-                    // libm `round` call.
-                    block.color[i] = [0, 1, 2].map(|k| {
-                        ((f32::from(c_old[k]) * w_old + f32::from(c_obs[k]) * w_obs) / w_sum + 0.5)
+                    let nearest = quad[x] as usize
+                        + ((right >> x) & 1) as usize
+                        + w * ((below >> x) & 1) as usize;
+                    let c_old = color[base + x];
+                    let c_obs = rgb.get(nearest).copied().unwrap_or(c_old);
+                    // Colour blends in 16-bit fixed point (the observation's share in units of
+                    // 2⁻¹⁶, rounded): integer multiply-adds instead of six int ↔ float
+                    // conversions, exact to well under one 8-bit level. The share is ≤ 1, so the
+                    // blend of two bytes stays ≤ 255.
+                    let b16 = ((share[x] * 65536.0 + 0.5) as u32).min(65536);
+                    let a16 = 65536 - b16;
+                    color[base + x] = [0, 1, 2].map(|k| {
+                        ((u32::from(c_old[k]) * a16 + u32::from(c_obs[k]) * b16 + 32768) >> 16)
                             as u8
                     });
-                    block.weight[i] = w_sum.min(self.max_weight);
                 }
             }
         }

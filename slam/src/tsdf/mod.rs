@@ -107,6 +107,14 @@ pub struct TsdfConfig {
     pub max_depth_m: f32,
     /// Only blocks intersecting this region are allocated or updated. Default none (everything).
     pub roi: Option<Roi>,
+    /// A new block is allocated only when the truncation bands of at least this many pixels of
+    /// one frame cross it; blocks already allocated are updated by any pixel. Depth noise
+    /// scatters single pixels' bands far in front of and behind the surface, and each such
+    /// stray band would otherwise allocate its own blocks; a real surface crossing a block is
+    /// seen by many pixels. Default 1 (every block any band touches). 4 cuts the noisy 12-frame
+    /// full-frame orbit from 60k to 40k blocks (clean: 20.9k → 20.3k) but lowers the target's
+    /// F-score at 1 cm by about 0.002 (fewer free-space observations near block corners).
+    pub min_block_support: u32,
 }
 
 impl Default for TsdfConfig {
@@ -118,6 +126,7 @@ impl Default for TsdfConfig {
             min_depth_m: 0.1,
             max_depth_m: 10.0,
             roi: None,
+            min_block_support: 1,
         }
     }
 }
@@ -149,6 +158,9 @@ impl TsdfConfig {
         }
         if !(self.max_depth_m.is_finite() && self.max_depth_m > self.min_depth_m) {
             return bad("max_depth_m", self.max_depth_m, "must exceed min_depth_m");
+        }
+        if self.min_block_support == 0 {
+            return bad("min_block_support", 0.0, "must be ≥ 1");
         }
         if let Some(roi) = &self.roi {
             roi.validate()?;
@@ -247,6 +259,8 @@ pub struct TsdfVolume {
     index: HashMap<BlockCoord, u32, BuildBlockHasher>,
     coords: Vec<BlockCoord>,
     blocks: Vec<Block>,
+    /// Buffers reused from frame to frame by the integration (no voxel data).
+    scratch: integrate::Scratch,
 }
 
 impl TsdfVolume {
@@ -261,6 +275,7 @@ impl TsdfVolume {
             index: HashMap::with_hasher(BuildBlockHasher::default()),
             coords: Vec::new(),
             blocks: Vec::new(),
+            scratch: integrate::Scratch::default(),
         })
     }
 

@@ -534,3 +534,61 @@ fn rejects_bad_input() {
         }
     );
 }
+
+/// A frontal plane at 1 m with a few isolated stray measurements 0.5 m behind it, as depth
+/// noise or dropouts leave them, seen from the origin looking along +z.
+fn plane_with_strays(strays: &[(u32, u32)]) -> (RgbdFrame, PinholeCamera) {
+    let cam = camera();
+    // Depth along the optical axis of the plane z = 1 is 1 at every pixel.
+    let mut depth = DepthImage::filled(cam.width, cam.height, 1.0);
+    for &(u, v) in strays {
+        *depth.get_mut(u, v).unwrap() = 1.5;
+    }
+    let rgb = RgbImage::filled(cam.width, cam.height, COLOR);
+    (RgbdFrame::new(0.0, rgb, depth, None).unwrap(), cam)
+}
+
+#[test]
+fn stray_pixels_do_not_allocate_blocks_with_support() {
+    let strays = [(40, 40), (160, 120), (250, 60), (90, 200), (300, 230)];
+    let (frame, cam) = plane_with_strays(&strays);
+    let pose = Isometry3::identity();
+    let fused = |support| {
+        let mut volume = TsdfVolume::new(TsdfConfig {
+            min_block_support: support,
+            ..TsdfConfig::default()
+        })
+        .unwrap();
+        let stats = volume.integrate(&frame, &cam, &pose).unwrap();
+        assert_eq!(stats.blocks_allocated, volume.block_count());
+        volume
+    };
+    let block = fused(1).config().block_size_m();
+    let behind = |v: &TsdfVolume| {
+        v.block_coords()
+            .iter()
+            .filter(|c| c[2] as f32 * block > 1.2)
+            .count()
+    };
+    let (every, supported) = (fused(1), fused(4));
+    // Each stray band allocates its own blocks without a support threshold ...
+    assert!(behind(&every) >= strays.len(), "{}", behind(&every));
+    // ... and none with it, while the plane keeps its blocks and its surface.
+    assert_eq!(behind(&supported), 0);
+    assert_eq!(
+        every.block_count() - behind(&every),
+        supported.block_count(),
+        "plane blocks differ"
+    );
+    let triangles = |v: &TsdfVolume| extract_mesh(v, &MeshingConfig::default()).face_count();
+    assert!(triangles(&supported) > 1000);
+    assert_eq!(triangles(&supported), triangles(&every));
+    // A support of 0 is rejected.
+    assert!(
+        TsdfVolume::new(TsdfConfig {
+            min_block_support: 0,
+            ..TsdfConfig::default()
+        })
+        .is_err()
+    );
+}
