@@ -6,10 +6,8 @@
 //! 3. bin triangles into 32×32-pixel tiles;
 //! 4. rasterize tiles in parallel (edge functions, top-left rule, 1/z interpolated in screen
 //!    space, which is exact for perspective);
-//! 5. resolve each pixel: exact depth by intersecting its ray with the winning face's plane,
-//!    perspective-correct world position and light, textured Lambert shading. Every one of
-//!    these is a linear form in the pixel's ray, set up once per face ([`FaceForms`]), so a
-//!    pixel costs a few dot products.
+//! 5. resolve each pixel: exact depth by intersecting its ray with the winning triangle's plane,
+//!    perspective-correct attributes, textured Lambert shading.
 //!
 //! Every stage is deterministic: tiles are disjoint, triangles keep a global order, and depth
 //! ties go to the earlier triangle, so the output does not depend on the thread count.
@@ -44,85 +42,6 @@ pub struct RenderOutput {
 enum Material {
     Terrain,
     Solid([u8; 3]),
-}
-
-/// A face's per-pixel quantities as linear forms in the pixel's ray r = ((u − cx)/fx,
-/// (v − cy)/fy, 1), camera frame.
-///
-/// On the face's plane n·p = d (camera frame), the point seen along r is p = z·r with
-/// 1/z = n·r / d, and the barycentric weight of corner A is w_A = ((B − p) × (C − p))·n / |n|².
-/// Expanding, w_A / z = g_A·r with g_A = [((B × C)·n / d)·n − (C − B) × n] / |n|², and the same
-/// for B and C cyclically. So any attribute f interpolated linearly over the face has
-/// f / z = (Σ f_k g_k)·r: exact perspective-correct interpolation from three dot products.
-#[derive(Debug, Clone, Copy)]
-enum FaceForms {
-    /// The face is seen at a usable angle.
-    Exact {
-        /// 1/z = `inv_depth`·r, 1/metres.
-        inv_depth: Vector3<f64>,
-        /// World x/z, y/z, z/z (metres per metre of depth).
-        world: [Vector3<f64>; 3],
-        /// Light / z.
-        light: Vector3<f64>,
-    },
-    /// The face's plane passes (numerically) through the camera centre: it is seen edge-on and
-    /// covers at most a sliver, drawn flat at its centroid with the rasterizer's depth.
-    EdgeOn {
-        centroid_world: Point3<f64>,
-        light: f32,
-    },
-}
-
-impl FaceForms {
-    /// Forms of the face with camera-frame corners `camera` and world corners `world`, and light
-    /// `light` at each corner.
-    fn new(camera: &[Point3<f64>; 3], world: &[Point3<f64>; 3], light: [f32; 3]) -> Self {
-        let [a, b, c] = camera.map(|p| p.coords);
-        let normal = (b - a).cross(&(c - a));
-        let d = normal.dot(&a);
-        let norm2 = normal.norm_squared();
-        // Relative to the face's size and distance: below this the plane holds the camera centre.
-        if !(d.abs() > 1e-9 * norm2.sqrt() * a.norm().max(1e-9)) {
-            let centroid = (world[0].coords + world[1].coords + world[2].coords) / 3.0;
-            return Self::EdgeOn {
-                centroid_world: Point3::from(centroid),
-                light: (light[0] + light[1] + light[2]) / 3.0,
-            };
-        }
-        let g = |p: &Vector3<f64>, q: &Vector3<f64>| {
-            (normal * (p.cross(q).dot(&normal) / d) - (q - p).cross(&normal)) / norm2
-        };
-        let weights = [g(&b, &c), g(&c, &a), g(&a, &b)];
-        let form = |values: [f64; 3]| {
-            weights[0] * values[0] + weights[1] * values[1] + weights[2] * values[2]
-        };
-        Self::Exact {
-            inv_depth: normal / d,
-            world: [0, 1, 2].map(|axis| form(world.map(|p| p[axis]))),
-            light: form(light.map(f64::from)),
-        }
-    }
-
-    /// Depth along the camera z axis (metres), world point and light seen along `ray`;
-    /// `raster_inv_depth` is the rasterizer's interpolated 1/z, used for edge-on faces.
-    #[inline]
-    fn at(&self, ray: &Vector3<f64>, raster_inv_depth: f32) -> (f64, Point3<f64>, f32) {
-        match self {
-            Self::Exact {
-                inv_depth,
-                world,
-                light,
-            } => {
-                let z = 1.0 / inv_depth.dot(ray);
-                let p = Point3::new(world[0].dot(ray), world[1].dot(ray), world[2].dot(ray));
-                (z, p * z, (light.dot(ray) * z) as f32)
-            }
-            Self::EdgeOn {
-                centroid_world,
-                light,
-            } => (1.0 / f64::from(raster_inv_depth), *centroid_world, *light),
-        }
-    }
 }
 
 /// A frustum half-space: a point is inside when the value is ≥ 0.
@@ -243,16 +162,9 @@ impl<'w> Renderer<'w> {
         camera.validate()?;
         scarp_slam::geometry::check_finite_isometry(world_from_camera, "world_from_camera")?;
         let camera_from_world = world_from_camera.inverse();
-        let (triangles, forms) = self.setup(camera, &camera_from_world);
+        let triangles = self.setup(camera, &camera_from_world);
         let (winners, inv_depth) = self.rasterize(camera, &triangles);
-        Ok(self.resolve(
-            camera,
-            world_from_camera,
-            &triangles,
-            &forms,
-            &winners,
-            &inv_depth,
-        ))
+        Ok(self.resolve(camera, world_from_camera, &triangles, &winners, &inv_depth))
     }
 
     /// Ambient plus Lambert light at the corners of a face, from its vertex normals (or its face
@@ -301,13 +213,11 @@ impl<'w> Renderer<'w> {
             .all(|plane| corners.iter().any(|c| plane(c) >= 0.0))
     }
 
-    /// Culls chunks, then sets up their faces in parallel. Returns the screen triangles and,
-    /// for each, its face's per-pixel forms.
     fn setup(
         &self,
         camera: &PinholeCamera,
         camera_from_world: &Isometry3<f64>,
-    ) -> (Vec<SetupTriangle>, Vec<FaceForms>) {
+    ) -> Vec<SetupTriangle> {
         let jobs: Vec<(usize, usize)> = self
             .layers
             .iter()
@@ -323,33 +233,29 @@ impl<'w> Renderer<'w> {
                     .map(move |(c, _)| (l, c))
             })
             .collect();
-        let per_chunk: Vec<(Vec<SetupTriangle>, Vec<FaceForms>)> = jobs
+        let per_chunk: Vec<Vec<SetupTriangle>> = jobs
             .par_iter()
             .map(|&(l, c)| {
                 let layer = &self.layers[l];
                 let Chunk { start, end, .. } = layer.chunks[c];
-                let (mut triangles, mut forms) = (Vec::new(), Vec::new());
+                let mut out = Vec::new();
                 for face in &layer.faces[start..end] {
-                    let world = face.map(|v| layer.mesh.positions[v as usize].cast::<f64>());
-                    let corners = world.map(|p| camera_from_world * p);
-                    let first_new = triangles.len();
-                    setup_triangle(camera, &corners, l as u16, NEAR_PLANE_M, &mut triangles);
-                    if triangles.len() > first_new {
-                        let face_forms =
-                            FaceForms::new(&corners, &world, self.corner_light(layer, face));
-                        forms.resize(triangles.len(), face_forms);
+                    let corners = face.map(|v| {
+                        camera_from_world * layer.mesh.positions[v as usize].cast::<f64>()
+                    });
+                    let first_new = out.len();
+                    setup_triangle(camera, &corners, l as u16, NEAR_PLANE_M, &mut out);
+                    if out.len() > first_new {
+                        let corner_light = self.corner_light(layer, face);
+                        for t in &mut out[first_new..] {
+                            t.corner_light = corner_light;
+                        }
                     }
                 }
-                (triangles, forms)
+                out
             })
             .collect();
-        let count = per_chunk.iter().map(|(t, _)| t.len()).sum();
-        let (mut triangles, mut forms) = (Vec::with_capacity(count), Vec::with_capacity(count));
-        for (t, f) in per_chunk {
-            triangles.extend(t);
-            forms.extend(f);
-        }
-        (triangles, forms)
+        per_chunk.concat()
     }
 
     fn rasterize(
@@ -401,7 +307,6 @@ impl<'w> Renderer<'w> {
         camera: &PinholeCamera,
         world_from_camera: &Isometry3<f64>,
         triangles: &[SetupTriangle],
-        forms: &[FaceForms],
         winners: &[u32],
         inv_depth: &[f32],
     ) -> RenderOutput {
@@ -409,9 +314,6 @@ impl<'w> Renderer<'w> {
         let width = w as usize;
         let world = self.world;
         let texture = &world.config.texture;
-        let ray_x: Vec<f64> = (0..width)
-            .map(|u| (u as f64 - camera.cx) / camera.fx)
-            .collect();
         let mut rgb = RgbImage::filled(w, h, [0, 0, 0]);
         let mut depth = DepthImage::filled(w, h, 0.0);
         let mut instance = MaskImage::filled(w, h, 0);
@@ -421,10 +323,14 @@ impl<'w> Renderer<'w> {
             .zip(instance.as_mut_slice().par_chunks_mut(width))
             .enumerate()
             .for_each(|(row, ((rgb_row, depth_row), instance_row))| {
-                let ray_y = (row as f64 - camera.cy) / camera.fy;
+                let v = row as f64;
                 for u in 0..width {
                     let i = row * width + u;
-                    let ray = Vector3::new(ray_x[u], ray_y, 1.0);
+                    let ray = Vector3::new(
+                        (u as f64 - camera.cx) / camera.fx,
+                        (v - camera.cy) / camera.fy,
+                        1.0,
+                    );
                     let winner = winners[i];
                     if winner == u32::MAX {
                         // Sky: brighter toward the horizon.
@@ -434,8 +340,24 @@ impl<'w> Renderer<'w> {
                         rgb_row[u] = [(190.0 - 70.0 * up) as u8, (210.0 - 50.0 * up) as u8, 235];
                         continue;
                     }
-                    let layer = &self.layers[triangles[winner as usize].layer as usize];
-                    let (z, p_world, light) = forms[winner as usize].at(&ray, inv_depth[i]);
+                    let t = &triangles[winner as usize];
+                    let layer = &self.layers[t.layer as usize];
+                    let [a, b, c] = &t.corners;
+                    let normal = &t.normal;
+                    let denominator = normal.dot(&ray);
+                    let z = if denominator.abs() > 1e-12 {
+                        normal.dot(&a.coords) / denominator
+                    } else {
+                        1.0 / f64::from(inv_depth[i])
+                    };
+                    let p = Point3::from(ray * z);
+                    let p_world = world_from_camera * p;
+                    // Barycentrics of p in the triangle (sub-areas against the face normal).
+                    let area2 = normal.norm_squared().max(1e-30);
+                    let w_a = ((b - p).cross(&(c - p)).dot(normal) / area2) as f32;
+                    let w_b = ((c - p).cross(&(a - p)).dot(normal) / area2) as f32;
+                    let [l_a, l_b, l_c] = t.corner_light;
+                    let light = l_a * w_a + l_b * w_b + l_c * (1.0 - w_a - w_b);
                     let albedo = match layer.material {
                         Material::Terrain => world.terrain_albedo.sample(p_world.x, p_world.y),
                         Material::Solid(base) => {
@@ -453,60 +375,5 @@ impl<'w> Renderer<'w> {
             depth_m: depth,
             instance,
         }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use proptest::prelude::*;
-
-    fn point() -> impl Strategy<Value = [f64; 3]> {
-        [-3.0..3.0f64, -3.0..3.0f64, 0.5..20.0f64]
-    }
-
-    proptest! {
-        /// The forms give back the depth, world point and interpolated light of any point of the
-        /// face, seen along its ray.
-        #[test]
-        fn face_forms_interpolate_exactly(
-            corners in [point(), point(), point()],
-            weights in [0.01..1.0f64, 0.01..1.0f64, 0.01..1.0f64],
-            light in [0.0..1.0f32, 0.0..1.0f32, 0.0..1.0f32],
-        ) {
-            let camera = corners.map(Point3::from);
-            let normal = (camera[1] - camera[0]).cross(&(camera[2] - camera[0]));
-            prop_assume!(normal.norm() > 1e-3);
-            prop_assume!(normal.dot(&camera[0].coords).abs() > 1e-3 * normal.norm());
-            let world_from_camera = Isometry3::new(
-                Vector3::new(10.0, -4.0, 2.0),
-                Vector3::new(0.3, -0.2, 1.1),
-            );
-            let world = camera.map(|p| world_from_camera * p);
-            let forms = FaceForms::new(&camera, &world, light);
-            let exact = matches!(forms, FaceForms::Exact { .. });
-            prop_assert!(exact);
-            let total = weights.iter().sum::<f64>();
-            let w = weights.map(|x| x / total);
-            let p = Point3::from(
-                camera[0].coords * w[0] + camera[1].coords * w[1] + camera[2].coords * w[2],
-            );
-            let (z, p_world, l) = forms.at(&(p.coords / p.z), 0.0);
-            prop_assert!((z - p.z).abs() < 1e-9 * p.z.max(1.0), "{z} vs {}", p.z);
-            prop_assert!((p_world - world_from_camera * p).norm() < 1e-8);
-            let expected = light[0] as f64 * w[0] + light[1] as f64 * w[1] + light[2] as f64 * w[2];
-            prop_assert!((f64::from(l) - expected).abs() < 1e-5);
-        }
-    }
-
-    #[test]
-    fn a_face_edge_on_to_the_camera_is_drawn_flat_at_the_raster_depth() {
-        let camera = [[0.0, 0.0, 1.0], [0.0, 0.0, 2.0], [0.0, 1.0, 2.0]].map(Point3::from);
-        let forms = FaceForms::new(&camera, &camera, [0.2, 0.4, 0.6]);
-        let (z, p, light) = forms.at(&Vector3::new(0.0, 0.1, 1.0), 0.5);
-        assert!(matches!(forms, FaceForms::EdgeOn { .. }));
-        assert_eq!(z, 2.0);
-        assert!((p - Point3::new(0.0, 1.0 / 3.0, 5.0 / 3.0)).norm() < 1e-12);
-        assert!((light - 0.4).abs() < 1e-6);
     }
 }

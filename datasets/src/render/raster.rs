@@ -1,6 +1,6 @@
 //! Triangle setup (culling, near-plane clipping, projection) and tile rasterization.
 
-use nalgebra::Point3;
+use nalgebra::{Point3, Vector3};
 use scarp_slam::PinholeCamera;
 
 /// Side of a square screen tile, pixels.
@@ -17,6 +17,13 @@ pub struct SetupTriangle {
     pub bbox: [u32; 4],
     /// Index of the source layer.
     pub layer: u16,
+    /// The unclipped face's corners in camera coordinates, metres.
+    pub corners: [Point3<f64>; 3],
+    /// The face's unnormalised normal (b − a) × (c − a), camera frame.
+    pub normal: Vector3<f64>,
+    /// Light (ambient + diffuse, in [0, 1]) at each corner, interpolated across the face
+    /// (Gouraud shading); set by the caller after setup.
+    pub corner_light: [f32; 3],
 }
 
 /// A face clipped against the near plane: up to 4 corners (a triangle loses one corner and
@@ -100,6 +107,9 @@ pub fn setup_triangle(
             inv_z,
             bbox: [u0 as u32, v0 as u32, u1 as u32, v1 as u32],
             layer,
+            corners: *corners,
+            normal,
+            corner_light: [1.0; 3],
         });
     }
 }
