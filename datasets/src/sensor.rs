@@ -5,7 +5,7 @@ use scarp_slam::image::{DepthImage, RgbImage};
 use scarp_slam::stats::standard_normal_quantile;
 use serde::{Deserialize, Serialize};
 
-use crate::noise::mix64;
+use crate::noise::derive_seed;
 
 /// A stereo depth camera and an RGB camera's noise. Depth noise follows the stereo model:
 /// disparity d = f·b/z gets Gaussian noise of σ_d pixels, so σ_z ≈ z²·σ_d/(f·b).
@@ -52,7 +52,7 @@ impl SensorConfig {
     }
 
     /// Applies range limits, edge and random dropouts and stereo noise to a clean depth image.
-    /// Each pixel draws from its own counter-based stream ([`pixel_bits`]), so the result does
+    /// Each pixel draws from its own counter-based stream (64 bits from [`derive_seed`] of the frame's seed and the pixel's index), so the result does
     /// not depend on the thread count, and a pixel's noise does not depend on the others.
     pub fn corrupt_depth(&self, depth_m: &DepthImage, focal_px: f64, seed: u64) -> DepthImage {
         let (w, h) = (depth_m.width() as usize, depth_m.height() as usize);
@@ -70,7 +70,7 @@ impl SensorConfig {
                     *value = 0.0;
                     continue;
                 }
-                let bits = pixel_bits(seed, (v * w + u) as u64);
+                let bits = derive_seed(seed, (v * w + u) as u64);
                 // Bits 48–63 decide an edge dropout, 32–47 a random one, 0–31 the noise.
                 let (edge_draw, random_draw) = ((bits >> 48) as u32, (bits >> 32) as u32 & 0xffff);
                 if random_draw < random_threshold {
@@ -123,7 +123,7 @@ impl SensorConfig {
         let mut out = rgb.as_slice().to_vec();
         out.par_chunks_mut(w).enumerate().for_each(|(v, row)| {
             for (u, pixel) in row.iter_mut().enumerate() {
-                let bits = pixel_bits(seed, (v * w + u) as u64);
+                let bits = derive_seed(seed, (v * w + u) as u64);
                 for (k, channel) in pixel.iter_mut().enumerate() {
                     let offset = offsets[(bits >> (16 * k)) as usize & 0xffff];
                     *channel = (i32::from(*channel) + offset).clamp(0, 255) as u8;
@@ -133,12 +133,6 @@ impl SensorConfig {
         // The buffer keeps the input's size.
         RgbImage::from_vec(rgb.width(), rgb.height(), out).expect("same size as input")
     }
-}
-
-/// 64 random bits for pixel `index` of the stream `seed`: a counter-based generator (a hash of
-/// the seed and the index), so a pixel's draw needs no state and no order.
-fn pixel_bits(seed: u64, index: u64) -> u64 {
-    mix64(seed ^ mix64(index.wrapping_add(0x9e37_79b9_7f4a_7c15)))
 }
 
 /// The 16-bit threshold below which a uniform 16-bit draw happens with probability `p`.

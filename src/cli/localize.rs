@@ -1,12 +1,11 @@
 //! `scarp localize`: run detection, tracking and the depth filter over a sequence and write
 //! each target's point set, ellipsoid and status.
 
-use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use clap::{Args, ValueEnum};
-use nalgebra::{Isometry3, Vector3};
+use nalgebra::Isometry3;
 use rand::SeedableRng;
 use rand::rngs::Xoshiro256PlusPlus;
 use scarp_datasets::sequence::{Sequence, read_mask_png, read_rgb_png};
@@ -22,7 +21,7 @@ use crate::detection::{BoundingBox, Detection, SimulatedDetector, SimulatedDetec
 use crate::evaluation::mesh::MeshDistance;
 use crate::localization::check_box;
 use crate::localization::{LocalizationConfig, Target, TargetCatalog, TargetStatus};
-use crate::mission::evaluation::estimate_frame_error_m;
+use crate::mission::evaluation::{EstimatorErrorByTarget, estimate_frame_error_m};
 use crate::tracking::{Tracker, TrackerConfig};
 
 /// Localize targets in a sequence with the bounding-box depth filter.
@@ -360,9 +359,7 @@ pub fn localize(args: &LocalizeArgs) -> anyhow::Result<LocalizeSummary> {
     };
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(args.seed);
     let mut merged = 0;
-    // Per target: the sum of estimate − truth positions over the frames that updated it, and
-    // their count.
-    let mut pose_error_by_target: HashMap<u32, (Vector3<f64>, usize)> = HashMap::new();
+    let mut pose_error_by_target = EstimatorErrorByTarget::default();
     let bar = super::progress_bar(seq.len() as u64, "localizing");
     for index in 0..seq.len() {
         let world_from_camera = frame_pose(&seq, index, args.poses)?;
@@ -397,14 +394,7 @@ pub fn localize(args: &LocalizeArgs) -> anyhow::Result<LocalizeSummary> {
             entry.world_from_camera_estimate,
             entry.world_from_camera_truth,
         ) {
-            let error = estimate.translation.vector - truth.translation.vector;
-            for id in &report.updated {
-                let slot = pose_error_by_target
-                    .entry(*id)
-                    .or_insert((Vector3::zeros(), 0));
-                slot.0 += error;
-                slot.1 += 1;
-            }
+            pose_error_by_target.record(&report.updated, &estimate, &truth);
         }
         bar.inc(1);
     }
@@ -440,11 +430,9 @@ pub fn localize(args: &LocalizeArgs) -> anyhow::Result<LocalizeSummary> {
             match compare_with_world(target, world, args.match_radius_m)? {
                 Some((rock, role, error_m, fraction)) => {
                     summary.localization_error_estimate_frame_m = pose_error_by_target
-                        .get(&target.id())
+                        .mean_m(target.id())
                         .zip(world.rocks.iter().find(|r| r.id == rock))
-                        .map(|((sum, n), r)| {
-                            estimate_frame_error_m(&c, &r.centroid, &(sum / *n as f64))
-                        });
+                        .map(|(mean, r)| estimate_frame_error_m(&c, &r.centroid, &mean));
                     summary.gt_rock_id = Some(rock);
                     summary.gt_role = Some(role);
                     summary.centroid_error_m = Some(error_m);

@@ -3,7 +3,9 @@
 //! Per-target mesh and fragility scores are computed when the target is finished
 //! ([`super::mapping::finish_target`]); this module only matches and counts.
 
-use nalgebra::Point3;
+use std::collections::HashMap;
+
+use nalgebra::{Isometry3, Point3, Vector3};
 use scarp_datasets::world::{Rock, RockRole, World};
 
 use super::catalog::{Catalog, TargetStatus};
@@ -21,6 +23,39 @@ pub fn nearest_rock<'w>(world: &'w World, center: &Point3<f64>) -> Option<(&'w R
         .map(|r| (r, (r.centroid - center).norm()))
         .filter(|(_, d)| *d <= MATCH_RADIUS_M)
         .min_by(|a, b| a.1.total_cmp(&b.1))
+}
+
+/// The state estimator's position error (estimate − truth, metres, world ENU) summed over the
+/// frames that updated each target's localization: what moves the truth into the frame the
+/// vehicle flies in.
+#[derive(Debug, Clone, Default)]
+pub struct EstimatorErrorByTarget {
+    sums: HashMap<u32, (Vector3<f64>, usize)>,
+}
+
+impl EstimatorErrorByTarget {
+    /// Records one frame that updated the targets `updated`, seen at the estimated and the true
+    /// camera poses.
+    pub fn record(
+        &mut self,
+        updated: &[u32],
+        world_from_camera_estimate: &Isometry3<f64>,
+        world_from_camera_truth: &Isometry3<f64>,
+    ) {
+        let error = world_from_camera_estimate.translation.vector
+            - world_from_camera_truth.translation.vector;
+        for id in updated {
+            let slot = self.sums.entry(*id).or_insert((Vector3::zeros(), 0));
+            slot.0 += error;
+            slot.1 += 1;
+        }
+    }
+
+    /// The mean error over the frames that updated target `id`; `None` if none did.
+    pub fn mean_m(&self, id: u32) -> Option<Vector3<f64>> {
+        // Entries exist only for targets updated at least once: the count is never zero.
+        self.sums.get(&id).map(|(sum, n)| sum / *n as f64)
+    }
 }
 
 /// The localization error in the frame the vehicle flies in: the distance from the localized

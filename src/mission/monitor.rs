@@ -113,7 +113,7 @@ impl SafetyConfig {
 pub struct Senses {
     /// The rangefinder's reading, metres (`None`: dropout or nothing in range).
     pub range_measured_m: Option<f64>,
-    /// The range the map predicts below the position the controller flies on, metres.
+    /// The range the terrain model predicts below the state estimate's position, metres.
     pub range_expected_m: Option<f64>,
     /// Distance from the camera to the nearest measured depth point, metres.
     pub nearest_depth_m: Option<f64>,

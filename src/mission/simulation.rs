@@ -24,6 +24,7 @@ use scarp_slam::{PinholeCamera, RgbdFrame};
 
 use super::catalog::{Catalog, MissionTarget, TargetStatus, is_already_handled};
 use super::config::MissionConfig;
+use super::evaluation::EstimatorErrorByTarget;
 use super::mapping::{MappingSession, finish_target};
 use super::mode::{FlightLogEntry, Mode};
 use super::monitor::{SafetyMonitor, Senses, nearest_depth_m};
@@ -143,7 +144,7 @@ pub struct Mission<'a> {
     recenter_attempts: usize,
     /// Per perception target: the sum of the estimator's position error (estimate − truth) over
     /// the frames that updated its localization, and their count (ground-truth bookkeeping).
-    estimator_error_by_target: std::collections::HashMap<u32, (Vector3<f64>, usize)>,
+    estimator_error_by_target: EstimatorErrorByTarget,
 }
 
 impl<'a> Mission<'a> {
@@ -228,7 +229,7 @@ impl<'a> Mission<'a> {
             crashed: false,
             last_depth: None,
             recenter_attempts: 0,
-            estimator_error_by_target: std::collections::HashMap::new(),
+            estimator_error_by_target: EstimatorErrorByTarget::default(),
             inputs,
         })
     }
@@ -531,15 +532,8 @@ impl<'a> Mission<'a> {
         timings.detect_s += stage.detect_s;
         timings.track_s += stage.track_s;
         timings.localize_s += stage.localize_s;
-        let error = estimate.translation.vector - truth.translation.vector;
-        for id in &stage.updated {
-            let entry = self
-                .estimator_error_by_target
-                .entry(*id)
-                .or_insert((Vector3::zeros(), 0));
-            entry.0 += error;
-            entry.1 += 1;
-        }
+        self.estimator_error_by_target
+            .record(&stage.updated, estimate, truth);
         let t = frame.timestamp_s;
         let states = self.perception.target_states();
         for state in &states {
@@ -932,9 +926,8 @@ impl<'a> Mission<'a> {
         }
         let clock = Instant::now();
         for (id, target) in self.targets.iter_mut() {
-            // Entries exist only for targets updated at least once: the count is never zero.
-            if let Some((sum, n)) = self.estimator_error_by_target.get(id) {
-                target.report.estimator_error_at_localization_m = Some((sum / *n as f64).into());
+            if let Some(mean) = self.estimator_error_by_target.mean_m(*id) {
+                target.report.estimator_error_at_localization_m = Some(mean.into());
             }
         }
         super::evaluation::ground_truth_summary(
