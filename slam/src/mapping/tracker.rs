@@ -1,9 +1,12 @@
 //! Frame-to-model tracking: each new frame is tracked against a raycast of the TSDF being built
 //! (at the previous frame's pose), then fused at the pose found.
 //!
-//! The initial guess is the state estimator's relative motion since the previous frame. When the
-//! odometry flags its result as untrustworthy, the frame is placed with that relative motion
-//! instead (composed onto the previous tracked pose) and still fused.
+//! The initial guess is the state estimator's relative motion since the previous frame
+//! ([`ModelTracker::process`]), or, for a camera with no state estimate (a handheld RGB-D
+//! sequence), the previous frame's tracked motion: a constant-velocity model
+//! ([`ModelTracker::process_unaided`]). When the odometry flags its result as untrustworthy, the
+//! frame is placed with that guessed motion instead (composed onto the previous tracked pose) and
+//! still fused.
 //!
 //! The tracker also accumulates the covariance of the motion since the last keyframe (the
 //! inverse odometry information of each frame, moved to the keyframe pair's frame with the SE(3)
@@ -128,8 +131,13 @@ pub struct ModelTracker {
     config: ModelTrackingConfig,
     volume: TsdfVolume,
     selector: KeyframeSelector,
-    /// The previous frame's fused pose and its state estimate.
-    previous: Option<(Isometry3<f64>, Isometry3<f64>)>,
+    /// The previous frame's fused pose.
+    previous: Option<Isometry3<f64>>,
+    /// The previous frame's state estimate (frames given one).
+    previous_estimate: Option<Isometry3<f64>>,
+    /// The previous frame's motion, `previous_from_current` of the frame before it (the
+    /// constant-velocity guess of [`ModelTracker::process_unaided`]).
+    last_motion: Isometry3<f64>,
     /// Covariance of the motion since the last keyframe (right perturbation).
     covariance_since_keyframe: Matrix6<f64>,
     /// The last keyframe as a reference (keyframe mode) and its pose.
@@ -146,6 +154,7 @@ impl ModelTracker {
     pub fn new(camera: PinholeCamera, config: ModelTrackingConfig) -> Result<Self, MappingError> {
         camera.validate().map_err(MappingError::Camera)?;
         config.odometry.validate()?;
+        config.keyframes.validate().map_err(MappingError::Camera)?;
         for (field, value) in [
             ("fallback_sigma_m", config.fallback_sigma_m),
             ("fallback_sigma_deg", config.fallback_sigma_deg),
@@ -164,6 +173,8 @@ impl ModelTracker {
             config,
             volume,
             previous: None,
+            previous_estimate: None,
+            last_motion: Isometry3::identity(),
             covariance_since_keyframe: Matrix6::zeros(),
             keyframe: None,
             frames: 0,
@@ -194,14 +205,49 @@ impl ModelTracker {
     ) -> Result<TrackedFrame, MappingError> {
         check_finite_isometry(world_from_camera_estimate, "world_from_camera_estimate")
             .map_err(MappingError::Camera)?;
+        let motion = self
+            .previous_estimate
+            .map(|previous| previous.inverse() * world_from_camera_estimate);
+        let tracked = self.process_with_motion(frame, world_from_camera_estimate, motion)?;
+        self.previous_estimate = Some(*world_from_camera_estimate);
+        Ok(tracked)
+    }
+
+    /// Tracks `frame` with no state estimate: the first frame is placed at
+    /// `world_from_first_camera` (the map's gauge; ignored afterwards), and each later frame's
+    /// guess is the previous frame's motion (constant velocity). Mixing this with
+    /// [`ModelTracker::process`] in one sequence guesses from the last frame that had an
+    /// estimate.
+    ///
+    /// # Errors
+    /// As [`ModelTracker::process`]; a non-finite `world_from_first_camera` is an error.
+    pub fn process_unaided(
+        &mut self,
+        frame: &RgbdFrame,
+        world_from_first_camera: &Isometry3<f64>,
+    ) -> Result<TrackedFrame, MappingError> {
+        check_finite_isometry(world_from_first_camera, "world_from_first_camera")
+            .map_err(MappingError::Camera)?;
+        let motion = self.previous.map(|_| self.last_motion);
+        self.process_with_motion(frame, world_from_first_camera, motion)
+    }
+
+    /// Tracks `frame` from the guess `previous_from_current_guess` (`None` for the first frame,
+    /// placed at `world_from_first_camera`), fuses it and offers it as a keyframe.
+    fn process_with_motion(
+        &mut self,
+        frame: &RgbdFrame,
+        world_from_first_camera: &Isometry3<f64>,
+        previous_from_current_guess: Option<Isometry3<f64>>,
+    ) -> Result<TrackedFrame, MappingError> {
         let index = self.frames;
         let odometry_config = &self.config.odometry;
         let pyramid = frame_pyramid(frame, odometry_config.levels);
         let (world_from_camera, odometry, fell_back, odometry_ms) = match self.previous {
-            None => (*world_from_camera_estimate, None, false, None),
-            Some((world_from_previous, previous_estimate)) => {
+            None => (*world_from_first_camera, None, false, None),
+            Some(world_from_previous) => {
                 let started = Instant::now();
-                let motion = previous_estimate.inverse() * world_from_camera_estimate;
+                let motion = previous_from_current_guess.unwrap_or_else(Isometry3::identity);
                 let source = SourceFrame::from_pyramid(&self.camera, &pyramid, odometry_config)?;
                 // The reference and its pose: the model seen from the previous frame, or the
                 // last keyframe.
@@ -283,7 +329,10 @@ impl ModelTracker {
                 ));
             }
         }
-        self.previous = Some((world_from_camera, *world_from_camera_estimate));
+        if let Some(world_from_previous) = self.previous {
+            self.last_motion = renormalized(&(world_from_previous.inverse() * world_from_camera));
+        }
+        self.previous = Some(world_from_camera);
         self.frames += 1;
         Ok(TrackedFrame {
             index,
