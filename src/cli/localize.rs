@@ -326,12 +326,7 @@ pub fn localize(args: &LocalizeArgs) -> anyhow::Result<LocalizeSummary> {
     let seq = Sequence::open(&args.sequence)
         .with_context(|| format!("opening sequence {}", args.sequence.display()))?;
     let config = match &args.config {
-        Some(path) => {
-            let text = std::fs::read_to_string(path)
-                .with_context(|| format!("reading {}", path.display()))?;
-            toml::from_str::<LocalizationConfig>(&text)
-                .with_context(|| format!("parsing {}", path.display()))?
-        }
+        Some(path) => super::read_toml_config::<LocalizationConfig>(path)?,
         None => LocalizationConfig::default(),
     };
     let world = if args.no_ground_truth {

@@ -52,6 +52,7 @@ use scarp_slam::mapping::{
 };
 use scarp_slam::meshing::{MeshingConfig, extract_mesh, remove_small_components};
 use scarp_slam::tsdf::{Roi, TsdfConfig, TsdfVolume};
+use serde::Deserialize;
 
 use crate::evaluation::mesh::{MeshEvalConfig, evaluate_mesh};
 use crate::evaluation::trajectory::{TrajectoryEvalConfig, evaluate_trajectory, umeyama};
@@ -109,6 +110,12 @@ pub struct MapArgs {
     /// 1° of parallax, 5° of turn or below 85% overlap).
     #[arg(long, value_enum, default_value = "auto")]
     pub keyframes: KeyframePreset,
+    /// With `--poses odometry`: a TOML file of keyframe thresholds (the fields of
+    /// `scarp_slam::keyframes::KeyframeConfig`: `min_translation_m`, `min_parallax_deg`,
+    /// `min_rotation_deg`, `min_overlap`, `overlap_stride_px`); missing fields keep the
+    /// `--keyframes` preset's values.
+    #[arg(long)]
+    pub keyframe_config: Option<PathBuf>,
     /// With `--poses odometry`: refine the keyframes (KLT landmarks on and around the ROI, bundle
     /// adjustment with odometry and GPS/IMU priors), move every frame by its keyframe's
     /// correction (`trajectory_ba.txt`), re-integrate all frames with those poses and mesh that.
@@ -155,6 +162,23 @@ impl KeyframePreset {
             Self::Auto => KeyframeConfig::handheld(),
         }
     }
+}
+
+/// The keyframe thresholds: the preset, with `--keyframe-config`'s fields over it.
+fn keyframe_config(args: &MapArgs) -> anyhow::Result<KeyframeConfig> {
+    let preset = args.keyframes.config(args.roi.is_some());
+    let Some(path) = &args.keyframe_config else {
+        return Ok(preset);
+    };
+    // Fields missing from the file keep the preset's values, not the struct's defaults.
+    let mut merged = toml::Table::try_from(preset)?;
+    merged.extend(super::read_toml_config::<toml::Table>(path)?);
+    let config = KeyframeConfig::deserialize(merged)
+        .with_context(|| format!("keyframe settings in {}", path.display()))?;
+    config
+        .validate()
+        .with_context(|| format!("keyframe settings in {}", path.display()))?;
+    Ok(config)
 }
 
 /// `--tracking-reference`.
@@ -242,12 +266,7 @@ fn refine(
     extra: &mut serde_json::Map<String, serde_json::Value>,
 ) -> anyhow::Result<(TriangleMesh, f64)> {
     let base = match &args.ba_config {
-        Some(path) => {
-            let text = std::fs::read_to_string(path)
-                .with_context(|| format!("reading {}", path.display()))?;
-            toml::from_str::<RefineConfig>(&text)
-                .with_context(|| format!("parsing {}", path.display()))?
-        }
+        Some(path) => super::read_toml_config::<RefineConfig>(path)?,
         None => RefineConfig::default(),
     };
     let config = RefineConfig {
@@ -542,7 +561,7 @@ fn fuse_with_odometry(
                 TrackingReferenceArg::Keyframe => TrackingReferenceKind::Keyframe,
                 TrackingReferenceArg::Model => TrackingReferenceKind::Model,
             },
-            keyframes: args.keyframes.config(args.roi.is_some()),
+            keyframes: keyframe_config(args)?,
             ..ModelTrackingConfig::default()
         },
     )?;

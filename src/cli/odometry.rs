@@ -1,7 +1,7 @@
 //! `scarp odometry`: track a whole sequence with RGBD odometry, initialised from the state
 //! estimator's relative motion, and write the trajectory.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::Context;
@@ -239,12 +239,6 @@ fn poses_of(sequence: &Sequence, frames: usize, truth: bool) -> Option<Vec<Stamp
         .collect()
 }
 
-fn read_config(path: &Path) -> anyhow::Result<SequenceOdometryConfig> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    toml::from_str(&text).with_context(|| format!("parsing {}", path.display()))
-}
-
 /// Runs `scarp odometry`.
 ///
 /// # Errors
@@ -253,7 +247,7 @@ pub fn run(args: OdometryArgs) -> anyhow::Result<()> {
     let sequence = Sequence::open(&args.sequence)
         .with_context(|| format!("opening sequence {}", args.sequence.display()))?;
     let config = match &args.config {
-        Some(path) => read_config(path)?,
+        Some(path) => super::read_toml_config(path)?,
         None => SequenceOdometryConfig::default(),
     };
     let frames = args.frames.unwrap_or(sequence.len()).min(sequence.len());
