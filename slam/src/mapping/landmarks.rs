@@ -46,8 +46,10 @@ pub struct LandmarkConfig {
     pub corners: CornerConfig,
     /// KLT from a landmark's anchor keyframe into a later one, started at the predicted pixel
     /// with the predicted window warp. Default: [`KltConfig::default`] with 2 pyramid levels
-    /// (the odometry predicts within a pixel or two) and a 15 px window (about 15 cm of rock at
-    /// 4 m: small enough for the plane model of the warp, large enough for sub-pixel matches).
+    /// (the odometry predicts within a pixel or two), a 15 px window (about 15 cm of rock at
+    /// 4 m: small enough for the plane model of the warp, large enough for sub-pixel matches)
+    /// and brightness compensation (keyframes seconds apart on a real camera differ in
+    /// exposure).
     pub klt: KltConfig,
     /// New corners are not started within this distance of a landmark observed in the same
     /// keyframe, pixels. Default 8.
@@ -101,6 +103,7 @@ impl Default for LandmarkConfig {
             klt: KltConfig {
                 window_px: 15,
                 pyramid_levels: 2,
+                compensate_brightness: true,
                 ..KltConfig::default()
             },
             min_track_distance_px: 8.0,
