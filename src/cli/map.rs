@@ -616,7 +616,12 @@ fn fuse_with_odometry(
             && let Some(failure) = tracked.odometry.as_ref().and_then(|o| o.failure.as_ref())
         {
             tracing::debug!(frame = i, %failure, "odometry failed; using the guessed motion");
-            failures.push(serde_json::json!({ "frame": i, "reason": failure.to_string() }));
+            // Unaided (no estimate.txt), a failed frame is skipped, not fused at a guess.
+            failures.push(serde_json::json!({
+                "frame": i,
+                "reason": failure.to_string(),
+                "fused": tracked.fused,
+            }));
         }
         if tracked.keyframe.is_some() {
             keyframes.push(i);

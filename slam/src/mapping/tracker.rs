@@ -5,8 +5,9 @@
 //! ([`ModelTracker::process`]), or, for a camera with no state estimate (a handheld RGB-D
 //! sequence), the previous frame's tracked motion: a constant-velocity model
 //! ([`ModelTracker::process_unaided`]). When the odometry flags its result as untrustworthy, the
-//! frame is placed with that guessed motion instead (composed onto the previous tracked pose) and
-//! still fused.
+//! frame is placed with that guessed motion instead (composed onto the previous tracked pose); it
+//! is still fused when the guess came from a state estimate, and skipped (never fused) when it
+//! was only the constant-velocity guess, which a failed frame has no way to check.
 //!
 //! The tracker also accumulates the covariance of the motion since the last keyframe (the
 //! inverse odometry information of each frame, moved to the keyframe pair's frame with the SE(3)
@@ -98,8 +99,10 @@ pub struct TrackedFrame {
     /// The odometry's result (`None` for the first frame, which has no model to track against).
     /// Its `reference_from_current` is relative to the previous frame's fused pose.
     pub odometry: Option<OdometryResult>,
-    /// The odometry failed and the estimator's motion was used.
+    /// The odometry failed and the guessed motion was used.
     pub fell_back: bool,
+    /// The frame was fused into the model (false for an unaided frame whose odometry failed).
+    pub fused: bool,
     /// Why the frame became a keyframe, or `None`.
     pub keyframe: Option<KeyframeReason>,
     /// For a keyframe after the first: the covariance of the tracked motion since the previous
@@ -208,7 +211,7 @@ impl ModelTracker {
         let motion = self
             .previous_estimate
             .map(|previous| previous.inverse() * world_from_camera_estimate);
-        let tracked = self.process_with_motion(frame, world_from_camera_estimate, motion)?;
+        let tracked = self.process_with_motion(frame, world_from_camera_estimate, motion, true)?;
         self.previous_estimate = Some(*world_from_camera_estimate);
         Ok(tracked)
     }
@@ -229,16 +232,18 @@ impl ModelTracker {
         check_finite_isometry(world_from_first_camera, "world_from_first_camera")
             .map_err(MappingError::Camera)?;
         let motion = self.previous.map(|_| self.last_motion);
-        self.process_with_motion(frame, world_from_first_camera, motion)
+        self.process_with_motion(frame, world_from_first_camera, motion, false)
     }
 
     /// Tracks `frame` from the guess `previous_from_current_guess` (`None` for the first frame,
-    /// placed at `world_from_first_camera`), fuses it and offers it as a keyframe.
+    /// placed at `world_from_first_camera`), fuses it and offers it as a keyframe. A frame whose
+    /// odometry failed is fused only when `fuse_on_guess` (the guess is a state estimate).
     fn process_with_motion(
         &mut self,
         frame: &RgbdFrame,
         world_from_first_camera: &Isometry3<f64>,
         previous_from_current_guess: Option<Isometry3<f64>>,
+        fuse_on_guess: bool,
     ) -> Result<TrackedFrame, MappingError> {
         let index = self.frames;
         let odometry_config = &self.config.odometry;
@@ -307,8 +312,11 @@ impl ModelTracker {
             }
         };
         let started = Instant::now();
-        self.volume
-            .integrate(frame, &self.camera, &world_from_camera)?;
+        let fused = !fell_back || fuse_on_guess;
+        if fused {
+            self.volume
+                .integrate(frame, &self.camera, &world_from_camera)?;
+        }
         let integrate_ms = started.elapsed().as_secs_f64() * 1e3;
         let mut keyframe = self.selector.offer(&world_from_camera, &frame.depth_m);
         if fell_back && keyframe.is_none() {
@@ -339,6 +347,7 @@ impl ModelTracker {
             world_from_camera,
             odometry,
             fell_back,
+            fused,
             keyframe,
             keyframe_covariance,
             odometry_ms,
@@ -434,6 +443,68 @@ mod tests {
         let e = left.inverse() * right;
         assert!(e.translation.vector.norm() < 1e-10, "{e:?}");
         assert!(e.rotation.angle() < 1e-10);
+    }
+
+    #[test]
+    fn an_unaided_frame_that_fails_is_not_fused() {
+        // A textured wall at 2 m, then a frame that sees depth only in a 10×10 patch at 1 m:
+        // too few correspondences, so the odometry fails. Unaided, the guessed pose has nothing
+        // behind it and the frame is skipped; with a state estimate it is fused there.
+        let camera = PinholeCamera::new(100.0, 100.0, 79.5, 59.5, 160, 120).unwrap();
+        let pixels = || (0..120u32).flat_map(|v| (0..160u32).map(move |u| (u, v)));
+        let rgb = crate::image::Image::from_vec(
+            160,
+            120,
+            pixels()
+                .map(|(u, v)| {
+                    let c = ((u / 8 + v / 8) % 2 * 200 + 30) as u8;
+                    [c, c, c]
+                })
+                .collect(),
+        )
+        .unwrap();
+        let wall = RgbdFrame::new(
+            0.0,
+            rgb.clone(),
+            crate::image::Image::filled(160, 120, 2.0f32),
+            None,
+        )
+        .unwrap();
+        let patch = crate::image::Image::from_vec(
+            160,
+            120,
+            pixels()
+                .map(|(u, v)| {
+                    if (70..80).contains(&u) && (50..60).contains(&v) {
+                        1.0f32
+                    } else {
+                        0.0
+                    }
+                })
+                .collect(),
+        )
+        .unwrap();
+        let stray = RgbdFrame::new(0.1, rgb, patch, None).unwrap();
+        let config = ModelTrackingConfig {
+            tsdf: TsdfConfig {
+                voxel_size_m: 0.05,
+                ..TsdfConfig::default()
+            },
+            ..ModelTrackingConfig::default()
+        };
+        let first = Isometry3::identity();
+        let mut unaided = ModelTracker::new(camera, config.clone()).unwrap();
+        assert!(unaided.process_unaided(&wall, &first).unwrap().fused);
+        let blocks = unaided.volume().stats().blocks;
+        let tracked = unaided.process_unaided(&stray, &first).unwrap();
+        assert!(tracked.fell_back && !tracked.fused);
+        assert_eq!(unaided.volume().stats().blocks, blocks);
+
+        let mut aided = ModelTracker::new(camera, config).unwrap();
+        aided.process(&wall, &first).unwrap();
+        let tracked = aided.process(&stray, &first).unwrap();
+        assert!(tracked.fell_back && tracked.fused);
+        assert!(aided.volume().stats().blocks > blocks);
     }
 
     #[test]
