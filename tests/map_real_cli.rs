@@ -6,15 +6,11 @@
 //! The sequence has no `estimate.txt`, so each frame is tracked from the previous frame's
 //! motion, keyframes are chosen by parallax, turn and overlap (the handheld preset), landmarks
 //! are spread over the whole frame, and the bundle adjustment is held only by its first
-//! keyframe. It must gather a real problem (≥ 1000 observations) and give a mesh closer to the
-//! one fused with the ground-truth poses than the odometry's mesh is (F-score at 1 cm).
-//!
-//! Its keyframe ATE is only held within 10% of the odometry's, not required to drop: on this
-//! piece the landmarks agree with the 7-Scenes poses (KinectFusion's, not motion capture) to
-//! 0.8–0.9 px median, while the adjustment fits them to about 0.25 px, so a few tenths of a
-//! millimetre of ATE either way is below what this ground truth resolves (issue 19's note has
-//! the figures; on rendered sequences, with exact ground truth, the same pipeline takes the ATE
-//! from 3.9 to 0.8 mm).
+//! keyframe. 7-Scenes' colour is not registered to its depth, so the landmarks' depths are not
+//! used as residuals (`--unregistered-depth`; with them the adjustment raised the keyframe ATE
+//! from 4.55 to 4.85 mm). It must gather a real problem (≥ 1000 observations), lower the ATE
+//! against the ground truth (keyframes and every frame), and give a mesh closer to the one fused
+//! with the ground-truth poses than the odometry's mesh is (F-score at 1 cm).
 
 mod common;
 use std::path::PathBuf;
@@ -57,9 +53,10 @@ fn bundle_adjustment_on_real_handheld_rgbd() {
         scarp(&args);
     };
     map("groundtruth", &[], &d("truth"));
-    map("odometry", &["--ba"], &d("ba"));
+    map("odometry", &["--ba", "--unregistered-depth"], &d("ba"));
     let summary = read_json(&dir.path().join("ba/map.json"));
     assert_eq!(summary["motion_guess"], "constant_velocity", "{summary}");
+    assert_eq!(summary["ba_depth_residuals"], false, "{summary}");
     let observations = number(&summary, "ba_observations");
     assert!(
         observations >= 1000.0,
@@ -69,10 +66,16 @@ fn bundle_adjustment_on_real_handheld_rgbd() {
     assert!(number(&summary, "ba_final_cost") < number(&summary, "ba_initial_cost"));
     let before = number(&summary, "ate_rmse_before_ba_m");
     let after = number(&summary, "ate_rmse_after_ba_m");
-    assert!(after <= 1.1 * before, "keyframe ATE {before} -> {after}");
-    // The odometry itself: within 5.5 mm of the ground truth over all 50 frames.
+    assert!(after < before, "keyframe ATE {before} -> {after}");
+    // The odometry itself: within 5.5 mm of the ground truth over all 50 frames; every frame
+    // moved with the adjustment's interpolated corrections does better.
     let odometry = number(&summary, "ate_rmse_m");
     assert!(odometry <= 0.0055, "odometry ATE {odometry}");
+    let all_after = number(&summary, "ate_rmse_all_frames_after_ba_m");
+    assert!(
+        all_after < odometry,
+        "all-frame ATE {odometry} -> {all_after}"
+    );
     for file in ["trajectory.txt", "trajectory_ba.txt", "keyframes_ba.txt"] {
         assert!(dir.path().join("ba").join(file).is_file(), "{file}");
     }

@@ -123,6 +123,11 @@ pub struct MapArgs {
     /// target's mesh F-score before and after (all frames, and keyframes alone).
     #[arg(long)]
     pub ba: bool,
+    /// With `--ba`: the depth images are not registered to the colour images (Microsoft
+    /// 7-Scenes), as `depth_registered = false` in `camera.toml` says: the landmarks' depths are
+    /// then not used as residuals.
+    #[arg(long, requires = "ba")]
+    pub unregistered_depth: bool,
     /// A TOML file of `--ba` settings (the fields of `scarp_slam::mapping::RefineConfig`:
     /// `landmarks`, `noise`, `solver`, `gps_sigma_m`, ...); missing fields keep their defaults.
     #[arg(long, requires = "ba")]
@@ -269,7 +274,9 @@ fn refine(
         Some(path) => super::read_toml_config::<RefineConfig>(path)?,
         None => RefineConfig::default(),
     };
+    let registered = seq.camera_file.depth_registered && !args.unregistered_depth;
     let config = RefineConfig {
+        depth_residuals: base.depth_residuals && registered,
         tsdf,
         meshing: MeshingConfig {
             min_weight: args.min_weight,
@@ -299,6 +306,7 @@ fn refine(
     )
     .with_context(|| format!("writing {}", path.display()))?;
     extra.insert("ba_keyframes".into(), keyframes.set.frames.len().into());
+    extra.insert("ba_depth_residuals".into(), config.depth_residuals.into());
     extra.insert("ba_landmarks".into(), refined.landmarks.into());
     extra.insert("ba_observations".into(), refined.observations.into());
     extra.insert("ba_initial_cost".into(), refined.ba.initial_cost.into());

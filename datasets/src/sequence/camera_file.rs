@@ -25,6 +25,17 @@ pub struct CameraFile {
     pub height: u32,
     /// Depth PNG units per metre (5000 for TUM).
     pub depth_scale: f64,
+    /// Whether the depth image is registered to the colour image (pixel (u, v) of both sees
+    /// the same point). Default true (TUM RGB-D, ICL-NUIM, scarp's renders); false for sensors
+    /// whose colour and depth come from two cameras unaligned, such as Microsoft 7-Scenes'.
+    /// Without registration the depth at a colour corner belongs to a neighbouring point, so it
+    /// is not used as a bundle-adjustment residual.
+    #[serde(default = "registered_by_default")]
+    pub depth_registered: bool,
+}
+
+fn registered_by_default() -> bool {
+    true
 }
 
 impl CameraFile {
@@ -38,6 +49,7 @@ impl CameraFile {
             width: camera.width,
             height: camera.height,
             depth_scale,
+            depth_registered: true,
         }
     }
 
@@ -90,5 +102,26 @@ impl CameraFile {
         );
         scarp_export::atomic::write_bytes_atomically(path, text.as_bytes())?;
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn depth_is_registered_unless_the_file_says_otherwise() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("camera.toml");
+        let base = "fx = 585.0\nfy = 585.0\ncx = 320.0\ncy = 240.0\nwidth = 640\nheight = 480\n\
+                    depth_scale = 1000.0\n";
+        std::fs::write(&path, base).unwrap();
+        assert!(CameraFile::read(&path).unwrap().depth_registered);
+        std::fs::write(&path, format!("{base}depth_registered = false\n")).unwrap();
+        let file = CameraFile::read(&path).unwrap();
+        assert!(!file.depth_registered);
+        // Written and read back.
+        file.write(&path).unwrap();
+        assert_eq!(CameraFile::read(&path).unwrap(), file);
     }
 }

@@ -50,6 +50,11 @@ pub struct RefineConfig {
     /// adjustment is solved again from the first solution, pixels; `None` solves once.
     /// Default 0.75 px (five σ of the default `noise`).
     pub reject_residual_px: Option<f64>,
+    /// Use the measured depth at each landmark observation as a residual. Default true. Turn it
+    /// off for a sensor whose depth is not registered to its colour image: the depth read at a
+    /// colour corner then belongs to a neighbouring point (landmarks are still initialised from
+    /// it, and triangulation across keyframes corrects that).
+    pub depth_residuals: bool,
     /// σ of the GPS/IMU position prior per axis, metres. Default 0.8 (the simulated estimator's
     /// vertical random walk; its horizontal one is 0.5).
     pub gps_sigma_m: f64,
@@ -91,6 +96,7 @@ impl Default for RefineConfig {
                 loss: RobustLoss::Huber { delta_px: 2.0 },
                 ..LmConfig::default()
             },
+            depth_residuals: true,
             gps_sigma_m: 0.8,
             attitude_sigma_deg: 2.0,
             odometry_information_scale: 0.1,
@@ -295,7 +301,13 @@ pub fn refine_keyframes(
             world_from_camera: pose,
         })
         .collect();
-    let landmarks = track_landmarks(camera, &views, config.tsdf.roi.as_ref(), &config.landmarks)?;
+    let mut landmarks =
+        track_landmarks(camera, &views, config.tsdf.roi.as_ref(), &config.landmarks)?;
+    if !config.depth_residuals {
+        for observation in &mut landmarks.observations {
+            observation.depth_m = None;
+        }
+    }
     let landmarks_ms = started.elapsed().as_secs_f64() * 1e3;
 
     let started = Instant::now();
