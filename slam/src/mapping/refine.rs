@@ -326,7 +326,6 @@ pub fn refine_keyframes(
         &landmarks.observations,
         &config.solver,
     )?;
-    let mut landmarks = landmarks;
     if let Some(threshold_px) = config.reject_residual_px {
         let kept = reject_outliers(
             camera,
