@@ -22,8 +22,8 @@ use std::path::PathBuf;
 use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion};
 use numpy::ndarray::Dimension;
 use numpy::{
-    Element, PyArray, PyArray1, PyArrayDyn, PyArrayMethods, PyReadonlyArray,
-    PyUntypedArray, PyUntypedArrayMethods,
+    Element, PyArray, PyArray1, PyArrayDyn, PyArrayMethods, PyReadonlyArray, PyUntypedArray,
+    PyUntypedArrayMethods,
 };
 use pyo3::exceptions::{PyOSError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
@@ -110,10 +110,7 @@ fn borrow_array<'py, T: Element, D: Dimension>(
         ))
     })?;
     let typed = obj.cast::<PyArray<T, D>>().map_err(|_| {
-        PyValueError::new_err(format!(
-            "{name} must be {expected}, got {}",
-            describe(obj)
-        ))
+        PyValueError::new_err(format!("{name} must be {expected}, got {}", describe(obj)))
     })?;
     if !untyped.is_c_contiguous() {
         return Err(PyValueError::new_err(format!(
@@ -122,9 +119,9 @@ fn borrow_array<'py, T: Element, D: Dimension>(
             untyped.shape()
         )));
     }
-    typed.try_readonly().map_err(|e| {
-        PyValueError::new_err(format!("{name} cannot be read: {e}"))
-    })
+    typed
+        .try_readonly()
+        .map_err(|e| PyValueError::new_err(format!("{name} cannot be read: {e}")))
 }
 
 /// Checks the trailing dimension of an N×`cols` array.
@@ -182,9 +179,14 @@ fn pose_from_array(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Isometry3<f64
 }
 
 /// An isometry → a new 4×4 float64 array (row-major).
-fn pose_to_array<'py>(py: Python<'py>, pose: &Isometry3<f64>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+fn pose_to_array<'py>(
+    py: Python<'py>,
+    pose: &Isometry3<f64>,
+) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
     let h = pose.to_homogeneous();
-    let rows: Vec<f64> = (0..4).flat_map(|r| (0..4).map(move |c| h[(r, c)])).collect();
+    let rows: Vec<f64> = (0..4)
+        .flat_map(|r| (0..4).map(move |c| h[(r, c)]))
+        .collect();
     PyArray1::from_vec(py, rows).reshape(vec![4, 4])
 }
 
@@ -194,7 +196,8 @@ fn frame_from_arrays(
     color: &Bound<'_, PyAny>,
     timestamp_s: f64,
 ) -> PyResult<RgbdFrame> {
-    let depth = borrow_array::<f32, numpy::Ix2>(depth_m, "depth_m", "an H×W float32 array of metres")?;
+    let depth =
+        borrow_array::<f32, numpy::Ix2>(depth_m, "depth_m", "an H×W float32 array of metres")?;
     let rgb = borrow_array::<u8, numpy::Ix3>(color, "color", "an H×W×3 uint8 array")?;
     let (h, w) = (depth.shape()[0], depth.shape()[1]);
     let cs = rgb.shape();
@@ -240,10 +243,20 @@ fn mesh_from_arrays(
     triangles: &Bound<'_, PyAny>,
     colors: Option<&Bound<'_, PyAny>>,
 ) -> PyResult<TriangleMesh> {
-    let v = borrow_array::<f32, numpy::Ix2>(vertices, "vertices", "an N×3 float32 array of metres")?;
+    let v =
+        borrow_array::<f32, numpy::Ix2>(vertices, "vertices", "an N×3 float32 array of metres")?;
     check_cols("vertices", v.shape(), 3, "an N×3 float32 array of metres")?;
-    let f = borrow_array::<u32, numpy::Ix2>(triangles, "triangles", "an M×3 uint32 array of vertex indices")?;
-    check_cols("triangles", f.shape(), 3, "an M×3 uint32 array of vertex indices")?;
+    let f = borrow_array::<u32, numpy::Ix2>(
+        triangles,
+        "triangles",
+        "an M×3 uint32 array of vertex indices",
+    )?;
+    check_cols(
+        "triangles",
+        f.shape(),
+        3,
+        "an M×3 uint32 array of vertex indices",
+    )?;
     let vs = v.as_slice().map_err(value_error)?;
     if let Some(i) = vs.iter().position(|x| !x.is_finite()) {
         return Err(PyValueError::new_err(format!(
@@ -297,7 +310,11 @@ type MeshArrays<'py> = (
 fn mesh_to_arrays(py: Python<'_>, mesh: TriangleMesh) -> PyResult<MeshArrays<'_>> {
     let n = mesh.positions.len();
     let m = mesh.faces.len();
-    let vertices: Vec<f32> = mesh.positions.iter().flat_map(|p| [p.x, p.y, p.z]).collect();
+    let vertices: Vec<f32> = mesh
+        .positions
+        .iter()
+        .flat_map(|p| [p.x, p.y, p.z])
+        .collect();
     let vertices = PyArray1::from_vec(py, vertices).reshape(vec![n, 3])?;
     let triangles = PyArray1::from_vec(py, mesh.faces.into_flattened()).reshape(vec![m, 3])?;
     let colors = if mesh.colors.len() == n && n > 0 {
@@ -431,7 +448,10 @@ impl PyRgbdOdometry {
     /// pose given to the first frame (default identity).
     #[new]
     #[pyo3(signature = (config_json, world_from_first_camera=None))]
-    fn new(config_json: &str, world_from_first_camera: Option<&Bound<'_, PyAny>>) -> PyResult<Self> {
+    fn new(
+        config_json: &str,
+        world_from_first_camera: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<Self> {
         guard("RgbdOdometry()", || {
             let config: OdometryConfig = parse_config("odometry configuration", config_json)?;
             config.validate().map_err(value_error)?;
@@ -471,7 +491,11 @@ impl PyRgbdOdometry {
                 let pose = prior.unwrap_or(self.initial_world_from_camera);
                 self.previous = Some((frame, camera, pose));
                 let details = serde_json::json!({ "first_frame": true });
-                return Ok((pose_to_array(py, &pose)?, "first_frame".to_string(), details.to_string()));
+                return Ok((
+                    pose_to_array(py, &pose)?,
+                    "first_frame".to_string(),
+                    details.to_string(),
+                ));
             };
             if reference_camera != camera {
                 // Keep the reference: this frame is refused, not tracked.
@@ -495,7 +519,10 @@ impl PyRgbdOdometry {
                 }
             };
             let (pose, status) = match &result.failure {
-                None => (world_from_reference * result.reference_from_current, "ok".to_string()),
+                None => (
+                    world_from_reference * result.reference_from_current,
+                    "ok".to_string(),
+                ),
                 Some(failure) => (
                     prior.unwrap_or(world_from_reference),
                     format!("failed: {failure}"),
@@ -525,7 +552,12 @@ impl PyRgbdOdometry {
 /// Bundle-adjusts a BAL problem file; returns the JSON of `scarp ba --json`.
 #[pyfunction]
 #[pyo3(signature = (path, config_json, threads=None))]
-fn bundle_adjust_bal(py: Python<'_>, path: PathBuf, config_json: &str, threads: Option<usize>) -> PyResult<String> {
+fn bundle_adjust_bal(
+    py: Python<'_>,
+    path: PathBuf,
+    config_json: &str,
+    threads: Option<usize>,
+) -> PyResult<String> {
     guard("bundle_adjust_bal", || {
         let config: LmConfig = parse_config("bundle adjustment configuration", config_json)?;
         config.validate().map_err(value_error)?;
@@ -536,7 +568,9 @@ fn bundle_adjust_bal(py: Python<'_>, path: PathBuf, config_json: &str, threads: 
         if let Some(t) = threads {
             builder = builder.num_threads(t);
         }
-        let pool = builder.build().map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+        let pool = builder
+            .build()
+            .map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
         let mut problem = read_bal(&path).map_err(os_or_value)?;
         let start = std::time::Instant::now();
         let summary = py
@@ -646,7 +680,9 @@ fn stamped_from_array(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec<Stampe
         .enumerate()
         .map(|(i, r)| {
             if r.iter().any(|v| !v.is_finite()) {
-                return Err(PyValueError::new_err(format!("{name} row {i} is not finite")));
+                return Err(PyValueError::new_err(format!(
+                    "{name} row {i} is not finite"
+                )));
             }
             let q = nalgebra::Quaternion::new(r[7], r[4], r[5], r[6]);
             if (q.norm() - 1.0).abs() > 1e-3 {
@@ -799,8 +835,8 @@ impl PySequence {
                 .map_err(os_or_value)?;
             let (w, h) = (frame.width() as usize, frame.height() as usize);
             let depth = PyArray1::from_vec(py, frame.depth_m.into_vec()).reshape(vec![h, w])?;
-            let color =
-                PyArray1::from_vec(py, frame.rgb.into_vec().into_flattened()).reshape(vec![h, w, 3])?;
+            let color = PyArray1::from_vec(py, frame.rgb.into_vec().into_flattened())
+                .reshape(vec![h, w, 3])?;
             let estimate = entry
                 .world_from_camera_estimate
                 .map(|p| pose_to_array(py, &p))
