@@ -155,3 +155,28 @@ def test_redkitchen_through_python_matches_scarp_map(tmp_path):
     np.testing.assert_array_equal(cli.triangles, mesh.triangles)
     scores = scarp.eval_mesh(mesh, cli, tau_m=0.01)
     assert scores["fscore"] > 0.999
+
+
+def _mission_dir():
+    import os
+
+    d = os.environ.get("SCARP_MISSION_DIR")
+    return Path(d) if d else None
+
+
+@pytest.mark.skipif(_mission_dir() is None, reason="SCARP_MISSION_DIR (a finished `scarp simulate` folder) not set")
+def test_fragility_of_a_mission_mesh_reproduces_its_fragility_json():
+    import json
+
+    targets = sorted((_mission_dir() / "targets").glob("*/fragility.json"))
+    if not targets:
+        pytest.skip("the mission analysed no target")
+    for path in targets:
+        mesh = scarp.read_ply(path.parent / "mesh.ply")
+        report = scarp.fragility(mesh.vertices, mesh.triangles, scan=True)
+        written = json.loads(path.read_text())
+        assert set(report) == set(written)
+        for key in ("alpha_min_deg", "alpha_min_low_deg", "alpha_min_high_deg", "alpha_min_azimuth_deg"):
+            assert report[key] == pytest.approx(written[key], abs=1e-6), key
+        print(f"{path.parent.name}: α_min {report['alpha_min_deg']:.3f}° "
+              f"[{report['alpha_min_low_deg']:.3f}, {report['alpha_min_high_deg']:.3f}]° as in fragility.json")
