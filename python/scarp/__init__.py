@@ -77,8 +77,9 @@ class Mesh:
     """A triangle mesh in world ENU metres.
 
     Attributes:
-        vertices: N×3 float32 positions, metres.
-        triangles: M×3 uint32 vertex indices, counter-clockwise seen from outside.
+        vertices: N×3 float32 positions, metres (float64 is accepted when writing).
+        triangles: M×3 uint32 vertex indices, counter-clockwise seen from outside (any integer
+            dtype is accepted when writing).
         colors: N×3 uint8 sRGB vertex colours (zeros when the source had none).
         normals: N×3 float32 unit vertex normals, or None.
     """
@@ -108,7 +109,8 @@ class Mesh:
             ValueError: the arrays are malformed (dtype, shape, index out of range).
             OSError: the file cannot be written.
         """
-        _scarp.write_ply(os.fspath(path), self.vertices, self.triangles, self.colors, ascii)
+        v, t = _mesh_arrays(self.vertices, self.triangles, "write_ply")
+        _scarp.write_ply(os.fspath(path), v, t, self.colors, ascii)
 
     def write_glb(self, path: PathLike, name: str = "mesh") -> None:
         """Writes the mesh as binary glTF 2.0 (GLB). glTF is y-up: ENU (x, y, z) is stored as
@@ -118,7 +120,8 @@ class Mesh:
             ValueError: the arrays are malformed.
             OSError: the file cannot be written.
         """
-        _scarp.write_glb_file(os.fspath(path), self.vertices, self.triangles, self.colors, name)
+        v, t = _mesh_arrays(self.vertices, self.triangles, "write_glb")
+        _scarp.write_glb_file(os.fspath(path), v, t, self.colors, name)
 
 
 def read_ply(path: PathLike) -> Mesh:

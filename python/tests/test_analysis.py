@@ -180,3 +180,34 @@ def test_fragility_of_a_mission_mesh_reproduces_its_fragility_json():
             assert report[key] == pytest.approx(written[key], abs=1e-6), key
         print(f"{path.parent.name}: α_min {report['alpha_min_deg']:.3f}° "
               f"[{report['alpha_min_low_deg']:.3f}, {report['alpha_min_high_deg']:.3f}]° as in fragility.json")
+
+
+TUM_PAIR = SHARED_REAL / "tum_fr1_xyz_pair"
+
+
+@pytest.mark.skipif(not TUM_PAIR.is_dir(), reason="../shared/data/real/tum_fr1_xyz_pair is absent")
+def test_odometry_on_a_real_tum_pair_matches_truth_and_the_cli(tmp_path):
+    seq = scarp.read_sequence(TUM_PAIR)
+    f0, f1 = seq[0], seq[1]
+    cam = seq.camera
+    intrinsics = (cam["fx"], cam["fy"], cam["cx"], cam["cy"])
+    odo = scarp.RgbdOdometry(world_from_first_camera=f0.world_from_camera_truth)
+    assert odo.track(f0.depth_m, f0.color, intrinsics)[1] == "first_frame"
+    pose, status = odo.track(f1.depth_m, f1.color, intrinsics)
+    assert status == "ok", odo.last_details
+    truth_rel = np.linalg.inv(f0.world_from_camera_truth) @ f1.world_from_camera_truth
+    est_rel = np.linalg.inv(f0.world_from_camera_truth) @ pose
+    t_err = np.linalg.norm(truth_rel[:3, 3] - est_rel[:3, 3])
+    r = truth_rel[:3, :3].T @ est_rel[:3, :3]
+    r_err = math.degrees(math.acos(min(1.0, max(-1.0, (np.trace(r) - 1) / 2))))
+    print(f"TUM pair: motion {np.linalg.norm(truth_rel[:3, 3]) * 1e3:.1f} mm, "
+          f"error {t_err * 1e3:.1f} mm, {r_err:.3f}°")
+    assert t_err < 0.01 and r_err < 0.5
+
+    binary = scarp_binary()
+    if binary is None:
+        pytest.skip("no scarp binary to compare with")
+    subprocess.run([str(binary), "odometry", str(TUM_PAIR), "--out", str(tmp_path / "odo")],
+                   check=True, capture_output=True)
+    cli = scarp.read_tum(tmp_path / "odo" / "trajectory.txt")
+    np.testing.assert_allclose(pose[:3, 3], cli[1, 1:4], atol=1e-6)

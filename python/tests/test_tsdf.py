@@ -54,6 +54,16 @@ def test_mesh_files_round_trip(tmp_path, plane_frames):
     np.testing.assert_array_equal(back.colors, mesh.colors)
     glb = (tmp_path / "plane.glb").read_bytes()
     assert glb[:4] == b"glTF" and int.from_bytes(glb[8:12], "little") == len(glb)
+    # A mesh built in Python with float64 vertices and int64 indices writes too.
+    box = scarp.Mesh(
+        vertices=np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], np.float64),
+        triangles=np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]], np.int64),
+        colors=np.full((4, 3), 200, np.uint8),
+    )
+    box.write_ply(tmp_path / "tet.ply", ascii=True)
+    assert len(scarp.read_ply(tmp_path / "tet.ply")) == 4
+    with pytest.raises(ValueError, match="colors has 3 rows but there are 4 vertices"):
+        scarp.Mesh(box.vertices, box.triangles, box.colors[:3]).write_glb(tmp_path / "bad.glb")
 
 
 def test_unknown_config_key_is_a_value_error():
