@@ -388,6 +388,7 @@ fn opt(v: Option<f64>, digits: usize) -> String {
 /// folders must be written): the α table, then per target with a mesh its 3D view and polar
 /// plot, then the scripts. Targets whose files cannot be read are left out of the views.
 pub fn interactive_sections(dir: &Path, world: &World, report: &MissionReport) -> String {
+    let start = std::time::Instant::now();
     let mut html = String::new();
     // The table of every target's α with its interval.
     html.push_str(
@@ -485,6 +486,11 @@ colours: <label><input type=\"radio\" name=\"colour-{id}\" data-target=\"{id}\" 
         );
         views.push(view);
     }
+    tracing::info!(
+        "report.html: {} interactive target view(s) prepared in {:.2} s",
+        views.len(),
+        start.elapsed().as_secs_f64()
+    );
     if views.is_empty() {
         return html;
     }
