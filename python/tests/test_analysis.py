@@ -211,3 +211,47 @@ def test_odometry_on_a_real_tum_pair_matches_truth_and_the_cli(tmp_path):
                    check=True, capture_output=True)
     cli = scarp.read_tum(tmp_path / "odo" / "trajectory.txt")
     np.testing.assert_allclose(pose[:3, 3], cli[1, 1:4], atol=1e-6)
+
+
+def test_eval_mesh_and_traj_are_the_cli_figures(tmp_path):
+    import json
+
+    binary = scarp_binary()
+    if binary is None:
+        pytest.skip("no scarp binary (set SCARP_BIN or build target/*/scarp)")
+    v, t = box_mesh(0.4, 0.4, 1.0)
+    gt = scarp.Mesh(v.astype(np.float32), t.astype(np.uint32), np.zeros((8, 3), np.uint8))
+    moved = scarp.Mesh((v + [0.004, -0.003, 0.002]).astype(np.float32), t.astype(np.uint32), gt.colors)
+    gt.write_ply(tmp_path / "gt.ply")
+    moved.write_ply(tmp_path / "mesh.ply")
+    cli = json.loads(subprocess.run(
+        [str(binary), "eval", "mesh", "--gt", str(tmp_path / "gt.ply"), "--mesh", str(tmp_path / "mesh.ply"),
+         "--tau", "0.005", "--json"], check=True, capture_output=True, text=True).stdout)
+    py = scarp.eval_mesh(tmp_path / "mesh.ply", tmp_path / "gt.ply", tau_m=0.005)
+    _assert_same_figures(py, cli)
+
+    rng = np.random.default_rng(1)
+    n = 30
+    gt_rows = np.zeros((n, 8))
+    gt_rows[:, 0] = np.arange(n) * 0.05
+    gt_rows[:, 1] = np.linspace(0, 2, n)
+    gt_rows[:, 7] = 1.0
+    est_rows = gt_rows.copy()
+    est_rows[:, 1:4] += rng.normal(0, 0.02, (n, 3))
+    np.savetxt(tmp_path / "gt.txt", gt_rows, fmt="%.9f")
+    np.savetxt(tmp_path / "est.txt", est_rows, fmt="%.9f")
+    cli = json.loads(subprocess.run(
+        [str(binary), "eval", "traj", "--gt", str(tmp_path / "gt.txt"), "--est", str(tmp_path / "est.txt"),
+         "--align", "sim3", "--json"], check=True, capture_output=True, text=True).stdout)
+    py = scarp.eval_traj(tmp_path / "gt.txt", tmp_path / "est.txt", align="sim3")
+    _assert_same_figures(py, cli)
+
+
+def _assert_same_figures(py, cli):
+    """The same keys and values (numbers to 1e-12 relative: the CLI may be a debug build)."""
+    assert set(py) == set(cli)
+    for key, value in cli.items():
+        if isinstance(value, float):
+            assert py[key] == pytest.approx(value, rel=1e-12, abs=1e-15), key
+        else:
+            assert py[key] == value, key
