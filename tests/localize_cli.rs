@@ -145,3 +145,28 @@ fn missing_sequence_is_a_clear_error() {
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(stderr.contains("nope"), "{stderr}");
 }
+
+/// Issue 21's must-show: with its defaults (the mission's perception path, detector and
+/// tracker settings), `scarp localize` on the default fine-localization circle of seed 6 gives
+/// one target for rock 1 and no false one.
+#[test]
+fn the_default_fine_circle_gives_one_target() {
+    let dir = tempfile::tempdir().expect("a temporary directory");
+    let seq = dir.path().join("seq");
+    scarp_ok(&[
+        "render",
+        "--path",
+        "finecircle",
+        "--frames",
+        "300",
+        "--seed",
+        "6",
+        "--out",
+        path_str(&seq),
+    ]);
+    let out = dir.path().join("lz");
+    let json = localize(&seq, &out, "estimate", "klt");
+    rock_one(&json, &out);
+    assert_eq!(json["targets"].as_array().unwrap().len(), 1, "{json}");
+    assert_eq!(json["false_targets"].as_array().unwrap().len(), 0, "{json}");
+}

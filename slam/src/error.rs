@@ -74,4 +74,12 @@ pub enum SlamError {
     /// the target, or a view direction parallel to `up`).
     #[error("degenerate geometry: {0}")]
     Degenerate(String),
+    /// A setting is out of range.
+    #[error("invalid setting `{field}`: {reason}")]
+    InvalidConfig {
+        /// The setting.
+        field: &'static str,
+        /// Why it was rejected.
+        reason: &'static str,
+    },
 }

@@ -1,5 +1,11 @@
-//! Keyframe selection: a frame becomes a keyframe when the camera has moved, turned or lost
-//! enough view overlap since the last keyframe.
+//! Keyframe selection: a frame becomes a keyframe when it brings new information over the last
+//! keyframe: enough parallax for triangulation (the baseline seen from the scene's median depth),
+//! a turn, or lost view overlap (co-visibility). A fixed translation step can be added, as the
+//! mission's rings use.
+//!
+//! Two presets: [`KeyframeConfig::default`] for the mission's mapping rings (a UAV orbiting a
+//! rock at 4–5 m, 0.5 m steps) and [`KeyframeConfig::handheld`] for a camera carried by hand at
+//! 30 Hz (millimetre steps, so a step size would make a keyframe every few seconds only).
 
 use nalgebra::Isometry3;
 use serde::{Deserialize, Serialize};
@@ -11,9 +17,14 @@ use crate::image::DepthImage;
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct KeyframeConfig {
-    /// Camera translation since the last keyframe, metres. Default 0.5 m (about a tenth of the
-    /// 4 m mapping stand-off).
-    pub min_translation_m: f64,
+    /// Camera translation since the last keyframe, metres; `None` disables it. Default 0.5 m
+    /// (about a tenth of the 4 m mapping stand-off).
+    pub min_translation_m: Option<f64>,
+    /// Parallax since the last keyframe: the angle that the camera's translation subtends at
+    /// the median depth of the current frame, degrees; `None` disables it. Scale-free, so one
+    /// value suits a rock at 4 m and a kitchen at 2 m. Default `None` (the mission's rings step
+    /// by `min_translation_m`, about 6° at 4.5 m).
+    pub min_parallax_deg: Option<f64>,
     /// Camera rotation since the last keyframe, degrees. Default 10°.
     pub min_rotation_deg: f64,
     /// Overlap below this (fraction of the frame's depth pixels that land inside the keyframe's
@@ -26,11 +37,56 @@ pub struct KeyframeConfig {
 impl Default for KeyframeConfig {
     fn default() -> Self {
         Self {
-            min_translation_m: 0.5,
+            min_translation_m: Some(0.5),
+            min_parallax_deg: None,
             min_rotation_deg: 10.0,
             min_overlap: 0.7,
             overlap_stride_px: 4,
         }
+    }
+}
+
+impl KeyframeConfig {
+    /// A camera carried by hand at 30 Hz (a few millimetres and a fraction of a degree a
+    /// frame): a keyframe at 1° of parallax (3.5 cm at 2 m), 5° of turn or below 85% overlap,
+    /// which gives the bundle adjustment keyframes a few frames apart that share most of their
+    /// view, and no translation step.
+    pub fn handheld() -> Self {
+        Self {
+            min_translation_m: None,
+            min_parallax_deg: Some(1.0),
+            min_rotation_deg: 5.0,
+            min_overlap: 0.85,
+            overlap_stride_px: 4,
+        }
+    }
+
+    /// Checks the ranges.
+    ///
+    /// # Errors
+    /// [`crate::SlamError::InvalidConfig`] naming the field.
+    pub fn validate(&self) -> Result<(), crate::SlamError> {
+        let bad = |field: &'static str, reason: &'static str| {
+            Err(crate::SlamError::InvalidConfig { field, reason })
+        };
+        for (field, value) in [
+            ("min_translation_m", self.min_translation_m),
+            ("min_parallax_deg", self.min_parallax_deg),
+        ] {
+            if value.is_some_and(|v| !(v.is_finite() && v > 0.0)) {
+                return bad(field, "must be positive and finite (or absent)");
+            }
+        }
+        if !(self.min_rotation_deg.is_finite() && self.min_rotation_deg > 0.0) {
+            return bad("min_rotation_deg", "must be positive and finite");
+        }
+        if !(0.0..=1.0).contains(&self.min_overlap) {
+            return bad("min_overlap", "must be in [0, 1]");
+        }
+        if self.overlap_stride_px == 0 {
+            return bad("overlap_stride_px", "must be at least 1");
+        }
+        Ok(())
     }
 }
 
@@ -41,10 +97,34 @@ pub enum KeyframeReason {
     First,
     /// Moved farther than `min_translation_m` (the distance, metres).
     Translation(f64),
+    /// Parallax above `min_parallax_deg` (the angle, degrees).
+    Parallax(f64),
     /// Turned farther than `min_rotation_deg` (the angle, degrees).
     Rotation(f64),
     /// Overlap fell below `min_overlap` (the overlap).
     Overlap(f64),
+}
+
+/// What the current frame shares with the keyframe, measured on its depth pixels.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ViewOverlap {
+    /// Fraction of the frame's depth pixels that project inside the keyframe's image, in front
+    /// of its camera (0 without depth or with a non-finite transform).
+    pub overlap: f64,
+    /// Median depth of those pixels, metres (0 without depth).
+    pub median_depth_m: f64,
+}
+
+impl ViewOverlap {
+    /// The parallax of a camera translation of `baseline_m` seen from the median depth,
+    /// degrees: `atan(baseline / median depth)`; 90° without depth.
+    pub fn parallax_deg(&self, baseline_m: f64) -> f64 {
+        if self.median_depth_m > 0.0 {
+            baseline_m.atan2(self.median_depth_m).to_degrees()
+        } else {
+            90.0
+        }
+    }
 }
 
 /// Fraction of the current frame's depth pixels (sampled every `stride` pixels) that project
@@ -57,8 +137,19 @@ pub fn overlap_ratio(
     keyframe_from_current: &Isometry3<f64>,
     stride: u32,
 ) -> f64 {
+    view_overlap(camera, current_depth_m, keyframe_from_current, stride).overlap
+}
+
+/// [`overlap_ratio`] and the median depth of the sampled pixels, in one pass.
+pub fn view_overlap(
+    camera: &PinholeCamera,
+    current_depth_m: &DepthImage,
+    keyframe_from_current: &Isometry3<f64>,
+    stride: u32,
+) -> ViewOverlap {
     let stride = stride.max(1);
     let (mut seen, mut total) = (0usize, 0usize);
+    let mut depths: Vec<f32> = Vec::new();
     for v in (0..current_depth_m.height()).step_by(stride as usize) {
         let row = current_depth_m.row(v);
         for u in (0..current_depth_m.width()).step_by(stride as usize) {
@@ -67,6 +158,7 @@ pub fn overlap_ratio(
                 continue;
             }
             total += 1;
+            depths.push(z);
             let p = camera.unproject(
                 &nalgebra::Point2::new(f64::from(u), f64::from(v)),
                 f64::from(z),
@@ -79,25 +171,44 @@ pub fn overlap_ratio(
         }
     }
     if total == 0 {
-        0.0
-    } else {
-        seen as f64 / total as f64
+        return ViewOverlap {
+            overlap: 0.0,
+            median_depth_m: 0.0,
+        };
+    }
+    let middle = depths.len() / 2;
+    let (_, median, _) = depths.select_nth_unstable_by(middle, f32::total_cmp);
+    ViewOverlap {
+        overlap: seen as f64 / total as f64,
+        median_depth_m: f64::from(*median),
     }
 }
 
 /// Decides whether the current frame becomes a keyframe, given its motion since the last one and
-/// its overlap with it. Checks translation, then rotation, then overlap; `None` keeps the old
-/// keyframe. A non-finite motion counts as a translation of NaN and makes a keyframe.
+/// what it shares with it. Checks translation, then parallax, then rotation, then overlap;
+/// `None` keeps the old keyframe. A non-finite motion counts as a translation of NaN and makes a
+/// keyframe.
 pub fn keyframe_decision(
     config: &KeyframeConfig,
     keyframe_from_current: &Isometry3<f64>,
-    overlap: f64,
+    view: &ViewOverlap,
 ) -> Option<KeyframeReason> {
     let translation_m = keyframe_from_current.translation.vector.norm();
     let rotation_deg = keyframe_from_current.rotation.angle().to_degrees();
-    if !(translation_m < config.min_translation_m) {
+    if !translation_m.is_finite()
+        || config
+            .min_translation_m
+            .is_some_and(|limit| translation_m >= limit)
+    {
         return Some(KeyframeReason::Translation(translation_m));
     }
+    if let Some(limit) = config.min_parallax_deg {
+        let parallax_deg = view.parallax_deg(translation_m);
+        if parallax_deg >= limit {
+            return Some(KeyframeReason::Parallax(parallax_deg));
+        }
+    }
+    let overlap = view.overlap;
     if !(rotation_deg < config.min_rotation_deg) {
         return Some(KeyframeReason::Rotation(rotation_deg));
     }
@@ -141,13 +252,13 @@ impl KeyframeSelector {
             None => Some(KeyframeReason::First),
             Some(last) => {
                 let keyframe_from_current = last.inverse() * world_from_camera;
-                let overlap = overlap_ratio(
+                let view = view_overlap(
                     &self.camera,
                     depth_m,
                     &keyframe_from_current,
                     self.config.overlap_stride_px,
                 );
-                keyframe_decision(&self.config, &keyframe_from_current, overlap)
+                keyframe_decision(&self.config, &keyframe_from_current, &view)
             }
         };
         if reason.is_some() {
@@ -162,13 +273,23 @@ mod tests {
     use super::*;
     use nalgebra::{Translation3, UnitQuaternion, Vector3};
 
+    fn full(overlap: f64) -> ViewOverlap {
+        ViewOverlap {
+            overlap,
+            median_depth_m: 2.0,
+        }
+    }
+
     #[test]
     fn thresholds_trigger_in_order() {
         let c = KeyframeConfig::default();
-        assert_eq!(keyframe_decision(&c, &Isometry3::identity(), 1.0), None);
+        assert_eq!(
+            keyframe_decision(&c, &Isometry3::identity(), &full(1.0)),
+            None
+        );
         let moved = Isometry3::translation(0.6, 0.0, 0.0);
         assert!(matches!(
-            keyframe_decision(&c, &moved, 1.0),
+            keyframe_decision(&c, &moved, &full(1.0)),
             Some(KeyframeReason::Translation(d)) if (d - 0.6).abs() < 1e-12
         ));
         let turned = Isometry3::from_parts(
@@ -176,15 +297,48 @@ mod tests {
             UnitQuaternion::from_axis_angle(&Vector3::y_axis(), 12f64.to_radians()),
         );
         assert!(matches!(
-            keyframe_decision(&c, &turned, 1.0),
+            keyframe_decision(&c, &turned, &full(1.0)),
             Some(KeyframeReason::Rotation(_))
         ));
         assert!(matches!(
-            keyframe_decision(&c, &Isometry3::identity(), 0.5),
+            keyframe_decision(&c, &Isometry3::identity(), &full(0.5)),
             Some(KeyframeReason::Overlap(_))
         ));
         let nan = Isometry3::translation(f64::NAN, 0.0, 0.0);
-        assert!(keyframe_decision(&c, &nan, 1.0).is_some());
+        assert!(keyframe_decision(&c, &nan, &full(1.0)).is_some());
+        assert!(keyframe_decision(&KeyframeConfig::handheld(), &nan, &full(1.0)).is_some());
+    }
+
+    #[test]
+    fn parallax_is_the_baseline_seen_from_the_median_depth() {
+        let c = KeyframeConfig::handheld();
+        // 3 cm at 2 m is 0.86°: no keyframe; 4 cm is 1.15°: a keyframe.
+        let short = Isometry3::translation(0.03, 0.0, 0.0);
+        assert_eq!(keyframe_decision(&c, &short, &full(1.0)), None);
+        let long = Isometry3::translation(0.04, 0.0, 0.0);
+        assert!(matches!(
+            keyframe_decision(&c, &long, &full(1.0)),
+            Some(KeyframeReason::Parallax(a)) if (a - 0.04f64.atan2(2.0).to_degrees()).abs() < 1e-9
+        ));
+        // The same 4 cm seen from 8 m is 0.29°: the scene is far, the baseline is not enough.
+        let far = ViewOverlap {
+            overlap: 1.0,
+            median_depth_m: 8.0,
+        };
+        assert_eq!(keyframe_decision(&c, &long, &far), None);
+        assert!(KeyframeConfig::handheld().validate().is_ok());
+        assert!(KeyframeConfig::default().validate().is_ok());
+        let bad = KeyframeConfig {
+            min_parallax_deg: Some(-1.0),
+            ..KeyframeConfig::handheld()
+        };
+        assert!(matches!(
+            bad.validate(),
+            Err(crate::SlamError::InvalidConfig {
+                field: "min_parallax_deg",
+                ..
+            })
+        ));
     }
 
     #[test]
@@ -203,6 +357,8 @@ mod tests {
             overlap_ratio(&camera, &DepthImage::filled(100, 80, 0.0), &shifted, 1),
             0.0
         );
+        let view = view_overlap(&camera, &depth, &shifted, 1);
+        assert_eq!(view.median_depth_m, 1.0);
     }
 
     #[test]

@@ -83,11 +83,7 @@ fn read_mesh(path: &Path) -> anyhow::Result<TriangleMesh> {
 /// Loads the configuration file (if any) and applies the command-line overrides.
 fn load_config(args: &FragilityArgs) -> anyhow::Result<FragilityConfig> {
     let mut config = match &args.config {
-        Some(path) => {
-            let text = std::fs::read_to_string(path)
-                .with_context(|| format!("reading config {}", path.display()))?;
-            toml::from_str(&text).with_context(|| format!("parsing config {}", path.display()))?
-        }
+        Some(path) => super::read_toml_config(path)?,
         None => FragilityConfig::default(),
     };
     if let Some(up) = args.up {

@@ -1,28 +1,30 @@
 //! `scarp localize`: run detection, tracking and the depth filter over a sequence and write
-//! each target's point set, ellipsoid and status.
+//! each target's point set, ellipsoid and status. It runs the mission's perception path
+//! ([`crate::mission::perception::Perception`]) with the mission's default detector, tracker and
+//! box-filter settings.
 
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use clap::{Args, ValueEnum};
 use nalgebra::Isometry3;
-use rand::SeedableRng;
-use rand::rngs::Xoshiro256PlusPlus;
-use scarp_datasets::sequence::{Sequence, read_mask_png, read_rgb_png};
+use scarp_datasets::noise::derive_seed;
+use scarp_datasets::sequence::Sequence;
 use scarp_datasets::world::{RockRole, World};
 use scarp_export::atomic::write_bytes_atomically;
 use scarp_export::ply::{PlyEncoding, write_point_cloud};
 use scarp_slam::PointCloud;
-use scarp_slam::image::gray_from_rgb;
 use serde::Serialize;
 
 use crate::detection::simulated::roles_from_boxes;
-use crate::detection::{BoundingBox, Detection, SimulatedDetector, SimulatedDetectorConfig};
+use crate::detection::{
+    BoundingBox, Detection, Detector, ReplayDetector, SimulatedDetector, SimulatedDetectorConfig,
+};
 use crate::evaluation::mesh::MeshDistance;
-use crate::localization::check_box;
-use crate::localization::{LocalizationConfig, Target, TargetCatalog, TargetStatus};
+use crate::localization::{LocalizationConfig, Target, TargetStatus};
+use crate::mission::config::MissionConfig;
 use crate::mission::evaluation::{EstimatorErrorByTarget, estimate_frame_error_m};
-use crate::tracking::{Tracker, TrackerConfig};
+use crate::mission::perception::{BoxSource, Perception};
 
 /// Localize targets in a sequence with the bounding-box depth filter.
 #[derive(Debug, Args)]
@@ -77,8 +79,8 @@ pub struct LocalizeArgs {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum DetectorKind {
-    /// [`SimulatedDetector`] with its default configuration, seeded with `--seed`, on the
-    /// sequence's instance masks; the roles of the rocks come from `boxes.txt`.
+    /// [`SimulatedDetector`] with the mission's default configuration, seeded from `--seed`, on
+    /// the sequence's instance masks; the roles of the rocks come from `boxes.txt`.
     Simulated,
     /// Perfect boxes of the target rocks from `boxes.txt`; the rock id is the track id.
     Groundtruth,
@@ -88,7 +90,8 @@ pub enum DetectorKind {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum TrackerKind {
-    /// [`Tracker`] with its default configuration, on the grey image of each frame.
+    /// The mission's KLT/Kalman box tracker with its default configuration, on the grey image
+    /// of each frame.
     Klt,
     /// No tracker: detections go straight to the depth filter.
     None,
@@ -194,65 +197,22 @@ fn frame_pose(seq: &Sequence, index: usize, source: PoseSource) -> anyhow::Resul
 }
 
 /// Perfect detections of the target rocks in frame `index`, from `boxes.txt` (matched by
-/// timestamp within 1 ms), score 1.
-fn ground_truth_detections(seq: &Sequence, index: usize) -> Vec<Detection> {
-    let t = seq.entries[index].timestamp_s;
+/// The sequence's `boxes.txt` target boxes as timestamped detections (a perfect detector).
+fn ground_truth_detections(seq: &Sequence) -> Vec<(f64, Detection)> {
     seq.boxes
         .iter()
-        .filter(|b| (b.timestamp_s - t).abs() < 1e-3 && b.role == RockRole::Target)
-        .map(|b| Detection {
-            bbox: BoundingBox::from_inclusive_pixels(b.bbox_px),
-            score: 1.0,
-            class_id: 0,
+        .filter(|b| b.role == RockRole::Target)
+        .map(|b| {
+            (
+                b.timestamp_s,
+                Detection {
+                    bbox: BoundingBox::from_inclusive_pixels(b.bbox_px),
+                    score: 1.0,
+                    class_id: 0,
+                },
+            )
         })
         .collect()
-}
-
-/// The simulated detector's detections in frame `index` (from its instance mask).
-fn detect(
-    detector: &mut SimulatedDetector,
-    seq: &Sequence,
-    index: usize,
-) -> anyhow::Result<Vec<Detection>> {
-    let entry = &seq.entries[index];
-    let path = entry.mask_path.as_ref().with_context(|| {
-        format!(
-            "{}: frame {index} has no instance mask, which the simulated detector needs",
-            seq.dir.display()
-        )
-    })?;
-    let mask = read_mask_png(path)?;
-    Ok(detector.detect_mask(&mask, entry.timestamp_s))
-}
-
-/// Steps the tracker on frame `index` and returns its confirmed tracks `(track id, box)` that
-/// are usable boxes in the image (others are skipped with a warning); with `updated_only`, only
-/// the tracks a detection updated in this frame.
-fn tracked_boxes(
-    tracker: &mut Tracker,
-    seq: &Sequence,
-    index: usize,
-    detections: &[Detection],
-    updated_only: bool,
-) -> anyhow::Result<Vec<(u64, BoundingBox)>> {
-    let entry = &seq.entries[index];
-    let rgb = read_rgb_png(&entry.rgb_path)?;
-    let tracks = tracker
-        .step(&gray_from_rgb(&rgb), detections)
-        .with_context(|| format!("tracking frame {index} of {}", seq.dir.display()))?;
-    let (w, h) = (seq.camera.width, seq.camera.height);
-    Ok(tracks
-        .iter()
-        .filter(|t| t.confirmed && (t.updated || !updated_only))
-        .filter(|t| match check_box(&t.bbox, 0, w, h) {
-            Ok(()) => true,
-            Err(e) => {
-                tracing::warn!(frame = index, track = t.id, "skipping track: {e}");
-                false
-            }
-        })
-        .map(|t| (t.id, t.bbox))
-        .collect())
 }
 
 /// Ground-truth comparison of one target: the nearest rock within `radius_m`, the centroid
@@ -326,12 +286,7 @@ pub fn localize(args: &LocalizeArgs) -> anyhow::Result<LocalizeSummary> {
     let seq = Sequence::open(&args.sequence)
         .with_context(|| format!("opening sequence {}", args.sequence.display()))?;
     let config = match &args.config {
-        Some(path) => {
-            let text = std::fs::read_to_string(path)
-                .with_context(|| format!("reading {}", path.display()))?;
-            toml::from_str::<LocalizationConfig>(&text)
-                .with_context(|| format!("parsing {}", path.display()))?
-        }
+        Some(path) => super::read_toml_config::<LocalizationConfig>(path)?,
         None => LocalizationConfig::default(),
     };
     let world = if args.no_ground_truth {
@@ -342,46 +297,43 @@ pub fn localize(args: &LocalizeArgs) -> anyhow::Result<LocalizeSummary> {
                 .with_context(|| format!("loading world `{}`", args.world))?,
         )
     };
-    let mut catalog = TargetCatalog::new(config)?;
-    let mut tracker = match args.tracker {
-        TrackerKind::Klt => Some(Tracker::new(TrackerConfig::default())?),
-        TrackerKind::None => None,
-    };
-    let mut detector = match args.detector {
-        DetectorKind::Simulated => Some(SimulatedDetector::new(
+    // The mission's perception path and defaults: the same detector settings, tracker and box
+    // filter, only the detector's and the filter's seeds come from `--seed`.
+    let defaults = MissionConfig::default();
+    let detector: Box<dyn Detector> = match args.detector {
+        DetectorKind::Simulated => Box::new(SimulatedDetector::new(
             SimulatedDetectorConfig {
-                seed: args.seed,
-                ..SimulatedDetectorConfig::default()
+                seed: derive_seed(args.seed, 0xde7),
+                ..defaults.detection.simulated.clone()
             },
             roles_from_boxes(&seq.boxes),
         )?),
-        DetectorKind::Groundtruth => None,
+        DetectorKind::Groundtruth => Box::new(ReplayDetector::new(ground_truth_detections(&seq))),
     };
-    let mut rng = Xoshiro256PlusPlus::seed_from_u64(args.seed);
+    let box_source = match (args.tracker, args.predicted_boxes) {
+        (TrackerKind::None, _) => BoxSource::Detections,
+        (TrackerKind::Klt, false) => BoxSource::UpdatedTracks,
+        (TrackerKind::Klt, true) => BoxSource::ConfirmedTracks,
+    };
+    let mut perception = Perception::with_detector(
+        detector,
+        defaults.tracker.clone(),
+        box_source,
+        config,
+        args.seed,
+    )?;
     let mut merged = 0;
     let mut pose_error_by_target = EstimatorErrorByTarget::default();
     let bar = super::progress_bar(seq.len() as u64, "localizing");
     for index in 0..seq.len() {
         let world_from_camera = frame_pose(&seq, index, args.poses)?;
-        let detections = match detector.as_mut() {
-            Some(detector) => detect(detector, &seq, index)?,
-            None => ground_truth_detections(&seq, index),
-        };
-        let boxes = match tracker.as_mut() {
-            Some(tracker) => {
-                tracked_boxes(tracker, &seq, index, &detections, !args.predicted_boxes)?
-            }
-            // Each detection its own track: ids `index · 2²⁰ + k` never repeat, so no box
-            // inherits a target through its track id.
-            None => detections
-                .iter()
-                .enumerate()
-                .map(|(k, d)| (((index as u64) << 20) + k as u64, d.bbox))
-                .collect(),
-        };
-        let report = catalog
-            .observe(&seq.camera, &world_from_camera, &boxes, &mut rng)
+        let frame = seq
+            .load_frame(index)
+            .with_context(|| format!("{}: loading frame {index}", seq.dir.display()))?;
+        let step = perception
+            .process(&frame, &seq.camera, &world_from_camera)
             .with_context(|| format!("frame {index} of {}", seq.dir.display()))?;
+        let report = &step.observed;
         for id in &report.registered {
             tracing::debug!(frame = index, target = id, "registered");
         }
@@ -399,6 +351,7 @@ pub fn localize(args: &LocalizeArgs) -> anyhow::Result<LocalizeSummary> {
         bar.inc(1);
     }
     bar.finish_and_clear();
+    let catalog = perception.catalog();
 
     let mut targets = Vec::new();
     let mut false_targets = Vec::new();

@@ -45,12 +45,14 @@ use scarp_export::glb::{GlbNode, GlbOptions, write_glb};
 use scarp_export::ply::{PlyEncoding, write_mesh};
 use scarp_export::tum::{StampedPose, write_tum_trajectory};
 use scarp_slam::TriangleMesh;
+use scarp_slam::keyframes::KeyframeConfig;
 use scarp_slam::mapping::{
     KeyframeSet, ModelTracker, ModelTrackingConfig, RefineConfig, TrackingReferenceKind,
     refine_keyframes, reprojection_stats,
 };
 use scarp_slam::meshing::{MeshingConfig, extract_mesh, remove_small_components};
 use scarp_slam::tsdf::{Roi, TsdfConfig, TsdfVolume};
+use serde::Deserialize;
 
 use crate::evaluation::mesh::{MeshEvalConfig, evaluate_mesh};
 use crate::evaluation::trajectory::{TrajectoryEvalConfig, evaluate_trajectory, umeyama};
@@ -103,6 +105,17 @@ pub struct MapArgs {
     /// With `--poses odometry`: what frames are tracked against.
     #[arg(long, value_enum, default_value = "keyframe")]
     pub tracking_reference: TrackingReferenceArg,
+    /// With `--poses odometry`: keyframe selection. `auto` picks `mission` with `--roi` (a UAV
+    /// orbiting a target: a keyframe every 0.5 m or 10°) and `handheld` without (a keyframe at
+    /// 1° of parallax, 5° of turn or below 85% overlap).
+    #[arg(long, value_enum, default_value = "auto")]
+    pub keyframes: KeyframePreset,
+    /// With `--poses odometry`: a TOML file of keyframe thresholds (the fields of
+    /// `scarp_slam::keyframes::KeyframeConfig`: `min_translation_m`, `min_parallax_deg`,
+    /// `min_rotation_deg`, `min_overlap`, `overlap_stride_px`); missing fields keep the
+    /// `--keyframes` preset's values.
+    #[arg(long)]
+    pub keyframe_config: Option<PathBuf>,
     /// With `--poses odometry`: refine the keyframes (KLT landmarks on and around the ROI, bundle
     /// adjustment with odometry and GPS/IMU priors), move every frame by its keyframe's
     /// correction (`trajectory_ba.txt`), re-integrate all frames with those poses and mesh that.
@@ -126,6 +139,46 @@ pub struct MapArgs {
     /// from the rock's bounding box is ignored, as `scarp eval mesh --crop-to-gt 0.1`.
     #[arg(long, default_value_t = 0.02)]
     pub tau: f64,
+}
+
+/// `--keyframes`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum KeyframePreset {
+    /// `mission` with a ROI, `handheld` without.
+    Auto,
+    /// [`KeyframeConfig::default`]: the mission's mapping rings.
+    Mission,
+    /// [`KeyframeConfig::handheld`]: a camera carried by hand at 30 Hz.
+    Handheld,
+}
+
+impl KeyframePreset {
+    /// The keyframe thresholds of the preset; `has_roi` decides `auto`.
+    pub fn config(self, has_roi: bool) -> KeyframeConfig {
+        match self {
+            Self::Mission => KeyframeConfig::default(),
+            Self::Handheld => KeyframeConfig::handheld(),
+            Self::Auto if has_roi => KeyframeConfig::default(),
+            Self::Auto => KeyframeConfig::handheld(),
+        }
+    }
+}
+
+/// The keyframe thresholds: the preset, with `--keyframe-config`'s fields over it.
+fn keyframe_config(args: &MapArgs) -> anyhow::Result<KeyframeConfig> {
+    let preset = args.keyframes.config(args.roi.is_some());
+    let Some(path) = &args.keyframe_config else {
+        return Ok(preset);
+    };
+    // Fields missing from the file keep the preset's values, not the struct's defaults.
+    let mut merged = toml::Table::try_from(preset)?;
+    merged.extend(super::read_toml_config::<toml::Table>(path)?);
+    let config = KeyframeConfig::deserialize(merged)
+        .with_context(|| format!("keyframe settings in {}", path.display()))?;
+    config
+        .validate()
+        .with_context(|| format!("keyframe settings in {}", path.display()))?;
+    Ok(config)
 }
 
 /// `--tracking-reference`.
@@ -213,12 +266,7 @@ fn refine(
     extra: &mut serde_json::Map<String, serde_json::Value>,
 ) -> anyhow::Result<(TriangleMesh, f64)> {
     let base = match &args.ba_config {
-        Some(path) => {
-            let text = std::fs::read_to_string(path)
-                .with_context(|| format!("reading {}", path.display()))?;
-            toml::from_str::<RefineConfig>(&text)
-                .with_context(|| format!("parsing {}", path.display()))?
-        }
+        Some(path) => super::read_toml_config::<RefineConfig>(path)?,
         None => RefineConfig::default(),
     };
     let config = RefineConfig {
@@ -395,28 +443,36 @@ fn refine(
     Ok((mesh_all_after, mesh_ms))
 }
 
-/// Every frame's odometry pose moved by the bundle adjustment's correction of the last keyframe
-/// at or before it: `refined_kf · odometry_kf⁻¹ · odometry_frame`.
+/// Every frame's odometry pose moved by the bundle adjustment's correction, interpolated
+/// between the keyframes around it (linear in translation, slerp in rotation, by frame index):
+/// `correction · odometry_frame`, with `correction_k = refined_k · odometry_k⁻¹`. Frames before
+/// the first keyframe take its correction, frames after the last take the last one's. A
+/// piecewise-constant correction would make every keyframe a step in the trajectory.
 fn correct_all_frames(
     keyframes: &StoredKeyframes,
     refined: &[Isometry3<f64>],
 ) -> Vec<Isometry3<f64>> {
-    let mut k = 0;
+    let corrections: Vec<Isometry3<f64>> = refined
+        .iter()
+        .zip(&keyframes.set.world_from_camera_odometry)
+        .map(|(after, before)| after * before.inverse())
+        .collect();
+    let indices = &keyframes.frame_indices;
     keyframes
         .odometry
         .iter()
         .enumerate()
         .map(|(i, frame)| {
-            while k + 1 < keyframes.frame_indices.len() && keyframes.frame_indices[k + 1] <= i {
-                k += 1;
-            }
-            match (
-                refined.get(k),
-                keyframes.set.world_from_camera_odometry.get(k),
-            ) {
-                (Some(after), Some(before)) => after * before.inverse() * frame.world_from_camera,
-                _ => frame.world_from_camera,
-            }
+            let next = indices.partition_point(|&f| f <= i);
+            let correction = match (next.checked_sub(1), corrections.get(next)) {
+                (None, _) => corrections.first(),
+                (Some(k), Some(after)) => {
+                    let s = (i - indices[k]) as f64 / (indices[next] - indices[k]) as f64;
+                    return corrections[k].lerp_slerp(after, s) * frame.world_from_camera;
+                }
+                (Some(k), None) => corrections.get(k),
+            };
+            correction.map_or(frame.world_from_camera, |c| c * frame.world_from_camera)
         })
         .collect()
 }
@@ -505,9 +561,22 @@ fn fuse_with_odometry(
                 TrackingReferenceArg::Keyframe => TrackingReferenceKind::Keyframe,
                 TrackingReferenceArg::Model => TrackingReferenceKind::Model,
             },
+            keyframes: keyframe_config(args)?,
             ..ModelTrackingConfig::default()
         },
     )?;
+    // A sequence without `estimate.txt` (a handheld camera) is tracked unaided: each frame's
+    // guess is the previous frame's motion, and the first frame sits at its ground-truth pose
+    // when there is one (the map's gauge only; nothing else of the truth is used).
+    let unaided = seq
+        .entries
+        .iter()
+        .all(|e| e.world_from_camera_estimate.is_none());
+    let world_from_first_camera = seq
+        .entries
+        .first()
+        .and_then(|e| e.world_from_camera_truth)
+        .unwrap_or_else(Isometry3::identity);
     let mut stored = args.ba.then(|| StoredKeyframes {
         set: KeyframeSet::default(),
         timestamps_s: Vec::new(),
@@ -522,28 +591,37 @@ fn fuse_with_odometry(
     let mut keyframes = Vec::new();
     let mut poses = Vec::with_capacity(seq.len());
     for (i, entry) in seq.entries.iter().enumerate() {
-        let estimate = entry
-            .world_from_camera_estimate
-            .or(entry.world_from_camera_truth)
-            .with_context(|| {
+        let estimate = if unaided {
+            None
+        } else {
+            Some(entry.world_from_camera_estimate.with_context(|| {
                 format!(
-                    "{}: frame {i} has neither an estimate nor a ground-truth pose",
+                    "{}: frame {i} has no state estimate (estimate.txt covers only part of the \
+                     sequence)",
                     args.sequence.display()
                 )
-            })?;
+            })?)
+        };
         let frame = seq
             .load_frame(i)
             .with_context(|| format!("{}: loading frame {i}", args.sequence.display()))?;
-        let tracked = tracker
-            .process(&frame, &estimate)
-            .with_context(|| format!("tracking frame {i}"))?;
+        let tracked = match &estimate {
+            Some(estimate) => tracker.process(&frame, estimate),
+            None => tracker.process_unaided(&frame, &world_from_first_camera),
+        }
+        .with_context(|| format!("tracking frame {i}"))?;
         integrate_ms.push(tracked.integrate_ms);
         odometry_ms.extend(tracked.odometry_ms);
         if tracked.fell_back
             && let Some(failure) = tracked.odometry.as_ref().and_then(|o| o.failure.as_ref())
         {
-            tracing::debug!(frame = i, %failure, "odometry failed; using the estimate's motion");
-            failures.push(serde_json::json!({ "frame": i, "reason": failure.to_string() }));
+            tracing::debug!(frame = i, %failure, "odometry failed; using the guessed motion");
+            // Unaided (no estimate.txt), a failed frame is skipped, not fused at a guess.
+            failures.push(serde_json::json!({
+                "frame": i,
+                "reason": failure.to_string(),
+                "fused": tracked.fused,
+            }));
         }
         if tracked.keyframe.is_some() {
             keyframes.push(i);
@@ -552,7 +630,9 @@ fn fuse_with_odometry(
                     .set
                     .world_from_camera_odometry
                     .push(tracked.world_from_camera);
-                stored.set.world_from_camera_estimate.push(estimate);
+                if let Some(estimate) = estimate {
+                    stored.set.world_from_camera_estimate.push(estimate);
+                }
                 stored
                     .set
                     .odometry_covariance
@@ -592,6 +672,15 @@ fn fuse_with_odometry(
     extra.insert("odometry_failures".into(), failures.len().into());
     extra.insert("odometry_failure_frames".into(), failures.into());
     extra.insert("keyframes".into(), keyframes.len().into());
+    extra.insert(
+        "motion_guess".into(),
+        if unaided {
+            "constant_velocity"
+        } else {
+            "state_estimate"
+        }
+        .into(),
+    );
     let eval = TrajectoryEvalConfig::default();
     if let Some(truth) = stamped(seq, |e| e.world_from_camera_truth) {
         let ate = |est: &[StampedPose]| {

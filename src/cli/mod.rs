@@ -90,6 +90,21 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
     }
 }
 
+/// Reads a TOML settings file into `T`; a missing field keeps its default and an unknown key is
+/// an error, as the settings' serde attributes say.
+///
+/// # Errors
+/// The file cannot be read, or it does not parse as `T` (the message names the file, and the
+/// parser's names the key and line).
+pub fn read_toml_config<T: serde::de::DeserializeOwned>(
+    path: &std::path::Path,
+) -> anyhow::Result<T> {
+    use anyhow::Context;
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    toml::from_str(&text).with_context(|| format!("parsing {}", path.display()))
+}
+
 /// A progress bar on a terminal; hidden when stderr is not one (CI, pipes).
 pub fn progress_bar(length: u64, message: &'static str) -> ProgressBar {
     let bar = ProgressBar::new(length);

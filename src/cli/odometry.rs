@@ -1,7 +1,7 @@
 //! `scarp odometry`: track a whole sequence with RGBD odometry, initialised from the state
 //! estimator's relative motion, and write the trajectory.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::Context;
@@ -97,7 +97,8 @@ pub struct OdometrySummary {
 }
 
 /// Tracks `frames` frames of `sequence`. Each frame is initialised with the estimator's relative
-/// motion since the previous frame, composed onto the previous frame's odometry pose.
+/// motion since the previous frame (or, without `estimate.txt`, the previous frame's tracked
+/// motion), composed onto the previous frame's odometry pose.
 ///
 /// # Errors
 /// Frame loading and configuration errors, naming the file.
@@ -111,11 +112,15 @@ pub fn track_sequence(
     let camera = sequence.camera;
     let odo = &config.odometry;
     odo.validate()?;
-    let estimate = |i: usize| {
-        sequence.entries[i]
-            .world_from_camera_estimate
-            .or(sequence.entries[i].world_from_camera_truth)
-    };
+    // The state estimate guides tracking; a sequence without one (a handheld camera) is
+    // tracked from the previous frame's motion, and its first frame sits at its ground-truth
+    // pose when there is one (the trajectory's gauge only).
+    let estimate = |i: usize| sequence.entries[i].world_from_camera_estimate;
+    let world_from_first_camera = sequence
+        .entries
+        .first()
+        .and_then(|e| e.world_from_camera_estimate.or(e.world_from_camera_truth));
+    let mut last_motion = Isometry3::identity();
     let mut result = SequenceOdometry {
         poses: Vec::with_capacity(frames),
         odometry_ms: Vec::new(),
@@ -137,7 +142,7 @@ pub fn track_sequence(
                 let previous_pose = previous.world_from_camera;
                 let relative = match (estimate(i - 1), estimate(i)) {
                     (Some(a), Some(b)) => a.inverse() * b,
-                    _ => Isometry3::identity(),
+                    _ => last_motion,
                 };
                 let guess = world_from_reference.inverse() * previous_pose * relative;
                 let source = SourceFrame::from_pyramid(&camera, &pyramid, odo)?;
@@ -158,8 +163,11 @@ pub fn track_sequence(
                     }
                 }
             }
-            _ => estimate(i).unwrap_or_else(Isometry3::identity),
+            _ => world_from_first_camera.unwrap_or_else(Isometry3::identity),
         });
+        if let Some(previous) = result.poses.last() {
+            last_motion = renormalized(&(previous.world_from_camera.inverse() * world_from_camera));
+        }
         let failed_now = result.failures.last().is_some_and(|(k, _)| *k == i);
         let new_reference = match mode {
             ReferenceMode::Previous => true,
@@ -231,12 +239,6 @@ fn poses_of(sequence: &Sequence, frames: usize, truth: bool) -> Option<Vec<Stamp
         .collect()
 }
 
-fn read_config(path: &Path) -> anyhow::Result<SequenceOdometryConfig> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    toml::from_str(&text).with_context(|| format!("parsing {}", path.display()))
-}
-
 /// Runs `scarp odometry`.
 ///
 /// # Errors
@@ -245,7 +247,7 @@ pub fn run(args: OdometryArgs) -> anyhow::Result<()> {
     let sequence = Sequence::open(&args.sequence)
         .with_context(|| format!("opening sequence {}", args.sequence.display()))?;
     let config = match &args.config {
-        Some(path) => read_config(path)?,
+        Some(path) => super::read_toml_config(path)?,
         None => SequenceOdometryConfig::default(),
     };
     let frames = args.frames.unwrap_or(sequence.len()).min(sequence.len());

@@ -40,8 +40,9 @@ pub struct RenderArgs {
     #[arg(long)]
     pub target: Option<u32>,
     /// Search altitude above the terrain's mean height, m (lawn-mower and fine-localization
-    /// circle).
-    #[arg(long, default_value_t = 20.0)]
+    /// circle). Default 10, the mission's search height (`search_height_agl_m`): at 20 m the
+    /// fine-localization circle sees its rock from 24 m, beyond the depth filter's 18 m.
+    #[arg(long, default_value_t = 10.0)]
     pub altitude: f64,
     /// Side of the square swept by a `lawnmower` around `--target`, m.
     #[arg(long, default_value_t = 30.0)]

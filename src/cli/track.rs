@@ -109,9 +109,7 @@ fn load_config(path: Option<&Path>) -> anyhow::Result<TrackConfig> {
     let Some(path) = path else {
         return Ok(TrackConfig::default());
     };
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    toml::from_str(&text).with_context(|| format!("parsing {}", path.display()))
+    super::read_toml_config(path)
 }
 
 /// Builds the detector named by `--detector`.

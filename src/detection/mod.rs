@@ -11,12 +11,14 @@ pub mod letterbox;
 pub mod nms;
 #[cfg(feature = "onnx")]
 pub mod onnx;
+pub mod replay;
 pub mod simulated;
 pub mod yolo;
 
 pub use nms::non_max_suppression;
 #[cfg(feature = "onnx")]
 pub use onnx::OnnxDetector;
+pub use replay::ReplayDetector;
 pub use simulated::{SimulatedDetector, SimulatedDetectorConfig};
 pub use yolo::{OnnxDetectorConfig, YoloLayout};
 

@@ -1,4 +1,5 @@
-//! Perception during Search and FineLocalize: detect → track → localize, at the estimated pose.
+//! Perception: detect → track → filter boxes → localize, at the estimated pose. The one path that
+//! the mission (Search and FineLocalize) and `scarp localize` both run, with the same defaults.
 //!
 //! Only confirmed tracks that a detection updated in this frame feed the depth filter: a
 //! sporadic false positive (a one-frame detection) never seeds a target, and KLT-only
@@ -18,10 +19,11 @@ use scarp_slam::{PinholeCamera, RgbdFrame};
 
 use super::config::MissionConfig;
 use crate::detection::simulated::SimulatedDetector;
-use crate::detection::{BoundingBox, Detector};
-use crate::localization::catalog::TargetCatalog;
+use crate::detection::{BoundingBox, Detection, Detector};
+use crate::localization::catalog::{ObserveReport, TargetCatalog};
+use crate::localization::config::LocalizationConfig;
 use crate::localization::target::TargetStatus as FilterStatus;
-use crate::tracking::tracker::Tracker;
+use crate::tracking::tracker::{Tracker, TrackerConfig};
 
 /// A localization target as the mission needs it.
 #[derive(Debug, Clone)]
@@ -157,8 +159,8 @@ pub fn center_in_box(
     Some(Point3::new(center_xy.x, center_xy.y, median_of(&|p| p.z)))
 }
 
-/// What perception did with one frame: the wall time of each stage, seconds, and the targets it
-/// localized.
+/// What perception did with one frame: the wall time of each stage, seconds, and what the depth
+/// filter did with its boxes.
 #[derive(Debug, Clone, Default)]
 pub struct PerceptionStep {
     /// Detection.
@@ -169,36 +171,82 @@ pub struct PerceptionStep {
     pub localize_s: f64,
     /// Targets whose points this frame updated (it localized them).
     pub updated: Vec<u32>,
+    /// The depth filter's report of the frame (registered, matched, removed, merged targets).
+    pub observed: ObserveReport,
+}
+
+/// Which boxes reach the depth filter.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BoxSource {
+    /// Confirmed tracks of the KLT/Kalman box tracker that a detection updated in this frame
+    /// (the default; the mission's).
+    UpdatedTracks,
+    /// Every confirmed track, predicted boxes included.
+    ConfirmedTracks,
+    /// Every detection, each as its own track (no tracker).
+    Detections,
 }
 
 /// Detector, box tracker and depth filter.
 pub struct Perception {
-    detector: SimulatedDetector,
+    detector: Box<dyn Detector>,
     tracker: Tracker,
+    box_source: BoxSource,
     catalog: TargetCatalog,
     rng: Xoshiro256PlusPlus,
+    frames: u64,
 }
 
 impl Perception {
-    /// The simulated detector for `world`'s rocks, a fresh tracker and an empty catalog.
+    /// The simulated detector for `world`'s rocks, a fresh tracker and an empty catalog, with the
+    /// mission's settings.
     ///
     /// # Errors
     /// Invalid detector, tracker or localization settings.
     pub fn new(world: &World, config: &MissionConfig, seed: u64) -> anyhow::Result<Self> {
         let mut detector_config = config.detection.simulated.clone();
         detector_config.seed = derive_seed(seed, 0xde7);
+        Self::with_detector(
+            Box::new(SimulatedDetector::for_world(detector_config, world)?),
+            config.tracker.clone(),
+            BoxSource::UpdatedTracks,
+            config.localization,
+            seed,
+        )
+    }
+
+    /// Any detector, with the given tracker and depth-filter settings; `seed` seeds the depth
+    /// filter's sampling.
+    ///
+    /// # Errors
+    /// Invalid tracker or localization settings.
+    pub fn with_detector(
+        detector: Box<dyn Detector>,
+        tracker: TrackerConfig,
+        box_source: BoxSource,
+        localization: LocalizationConfig,
+        seed: u64,
+    ) -> anyhow::Result<Self> {
         Ok(Self {
-            detector: SimulatedDetector::for_world(detector_config, world)?,
-            tracker: Tracker::new(config.tracker.clone())?,
-            catalog: TargetCatalog::new(config.localization)?,
+            detector,
+            tracker: Tracker::new(tracker)?,
+            box_source,
+            catalog: TargetCatalog::new(localization)?,
             rng: Xoshiro256PlusPlus::seed_from_u64(derive_seed(seed, 0x10c)),
+            frames: 0,
         })
+    }
+
+    /// The depth filter's targets.
+    pub fn catalog(&self) -> &TargetCatalog {
+        &self.catalog
     }
 
     /// Detects, tracks and localizes in one frame seen from `world_from_camera` (estimated).
     ///
     /// # Errors
-    /// A frame without an instance mask, or a non-finite pose.
+    /// A frame the detector cannot use (the simulated detector needs an instance mask), or a
+    /// non-finite pose.
     pub fn process(
         &mut self,
         frame: &RgbdFrame,
@@ -209,30 +257,35 @@ impl Perception {
         let detections = self.detector.detect(frame)?;
         let detect_s = clock.elapsed().as_secs_f64();
         let clock = Instant::now();
-        let tracks = self.tracker.step(&gray_from_rgb(&frame.rgb), &detections)?;
+        let candidates = match self.box_source {
+            BoxSource::Detections => detections_as_tracks(&detections, self.frames),
+            source => {
+                let tracks = self.tracker.step(&gray_from_rgb(&frame.rgb), &detections)?;
+                let updated_only = source == BoxSource::UpdatedTracks;
+                tracks
+                    .iter()
+                    .filter(|t| t.confirmed && (t.updated || !updated_only))
+                    .map(|t| (t.id, t.bbox))
+                    .collect()
+            }
+        };
+        self.frames += 1;
         let track_s = clock.elapsed().as_secs_f64();
         let clock = Instant::now();
-        let max_depth_m = self.catalog.config().max_depth_m;
-        let boxes: Vec<(u64, BoundingBox)> = tracks
-            .iter()
-            .filter(|t| t.confirmed && t.updated)
-            .filter(|t| t.bbox.is_inside_image(camera.width, camera.height, 0.0))
-            .filter(|t| {
-                median_depth_in_box(&frame.depth_m, &t.bbox).is_some_and(|d| d <= max_depth_m)
-            })
-            .filter(|t| {
-                BoundingBox::new(t.bbox.x_min, t.bbox.y_min, t.bbox.x_max, t.bbox.y_max).is_ok()
-            })
-            .map(|t| (t.id, t.bbox))
-            .collect();
+        let boxes = boxes_for_filter(
+            &candidates,
+            frame,
+            camera,
+            self.catalog.config().max_depth_m,
+        );
         let observed = self
             .catalog
             .observe(camera, world_from_camera, &boxes, &mut self.rng)?;
         tracing::debug!(
-            "t = {:.2} s: {} detections, {} tracks, {} boxes to the filter; {:?}",
+            "t = {:.2} s: {} detections, {} candidates, {} boxes to the filter; {:?}",
             frame.timestamp_s,
             detections.len(),
-            tracks.len(),
+            candidates.len(),
             boxes.len(),
             observed
         );
@@ -240,7 +293,8 @@ impl Perception {
             detect_s,
             track_s,
             localize_s: clock.elapsed().as_secs_f64(),
-            updated: observed.updated,
+            updated: observed.updated.clone(),
+            observed,
         })
     }
 
@@ -314,6 +368,34 @@ impl Perception {
             .filter(|b| distance_px(b) <= gate_px)
             .min_by(|a, b| distance_px(a).total_cmp(&distance_px(b))))
     }
+}
+
+/// Each detection as its own track: ids `frame · 2²⁰ + k` never repeat, so no box inherits a
+/// target through its track id.
+fn detections_as_tracks(detections: &[Detection], frame: u64) -> Vec<(u64, BoundingBox)> {
+    detections
+        .iter()
+        .enumerate()
+        .map(|(k, d)| ((frame << 20) + k as u64, d.bbox))
+        .collect()
+}
+
+/// The boxes that reach the depth filter: inside the image, with a valid shape, and whose rock
+/// lies within the filter's range (`max_depth_m`, by the median depth of the box's centre; see
+/// [`median_depth_in_box`]).
+pub fn boxes_for_filter(
+    candidates: &[(u64, BoundingBox)],
+    frame: &RgbdFrame,
+    camera: &PinholeCamera,
+    max_depth_m: f64,
+) -> Vec<(u64, BoundingBox)> {
+    candidates
+        .iter()
+        .filter(|(_, b)| b.is_inside_image(camera.width, camera.height, 0.0))
+        .filter(|(_, b)| median_depth_in_box(&frame.depth_m, b).is_some_and(|d| d <= max_depth_m))
+        .filter(|(_, b)| BoundingBox::new(b.x_min, b.y_min, b.x_max, b.y_max).is_ok())
+        .copied()
+        .collect()
 }
 
 #[cfg(test)]

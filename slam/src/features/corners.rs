@@ -43,6 +43,11 @@ pub struct CornerConfig {
     pub min_score: f32,
     /// No two corners closer than this, px. Default 3.
     pub min_distance_px: f32,
+    /// Spread the corners over a grid of `[columns, rows]` cells of the candidate area: each
+    /// cell keeps at most its share of `max_corners` (rounded up), strongest first, so a
+    /// textured corner of the image cannot take every corner. `None` keeps the strongest
+    /// corners wherever they are. Default `None`.
+    pub grid_cells: Option<[u32; 2]>,
 }
 
 impl Default for CornerConfig {
@@ -55,6 +60,7 @@ impl Default for CornerConfig {
             quality_level: 0.01,
             min_score: 1e-7,
             min_distance_px: 3.0,
+            grid_cells: None,
         }
     }
 }
@@ -80,6 +86,9 @@ impl CornerConfig {
         }
         if !(self.min_distance_px.is_finite() && self.min_distance_px >= 0.0) {
             return bad("min_distance_px", "must be finite and ≥ 0");
+        }
+        if self.grid_cells.is_some_and(|[c, r]| c == 0 || r == 0) {
+            return bad("grid_cells", "needs at least one column and one row");
         }
         Ok(())
     }
@@ -204,13 +213,22 @@ pub fn detect_corners(
         return Ok(Vec::new());
     }
     let scores = ScoreField::compute(gray, config, [u0, v0, u1, v1]);
-    let best = scores.values.iter().copied().fold(0.0f32, f32::max);
-    let threshold = (config.quality_level * best).max(config.min_score);
+    // With a grid, each cell's quality threshold is relative to its own best score: a weakly
+    // textured cell keeps its best corners.
+    let grid = config.grid_cells.map(|[columns, rows]| CornerGrid {
+        origin: (u0, v0),
+        columns,
+        cell_size: (
+            (u1 - u0 + 1).div_ceil(columns).max(1),
+            (v1 - v0 + 1).div_ceil(rows).max(1),
+        ),
+        cells: (columns * rows) as usize,
+    });
     let mut candidates = Vec::new();
     for v in v0..=v1 {
         for u in u0..=u1 {
             let s = scores.at(u, v);
-            if !(s > threshold) || !scores.is_local_max(u, v) {
+            if !(s > config.min_score) || !scores.is_local_max(u, v) {
                 continue;
             }
             if let Some((m, id)) = mask
@@ -221,9 +239,40 @@ pub fn detect_corners(
             candidates.push((s, u, v));
         }
     }
+    let cells = grid.as_ref().map_or(1, |g| g.cells);
+    let cell_of = |u: u32, v: u32| grid.as_ref().map_or(0, |g| g.cell(u, v));
+    let mut best = vec![0.0f32; cells];
+    for &(s, u, v) in &candidates {
+        let b = &mut best[cell_of(u, v)];
+        *b = b.max(s);
+    }
+    candidates.retain(|&(s, u, v)| s > config.quality_level * best[cell_of(u, v)]);
     // Strongest first; equal scores in raster order.
     candidates.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.2.cmp(&b.2)).then(a.1.cmp(&b.1)));
-    Ok(select_spread(&candidates, config))
+    let per_cell = config.max_corners.div_ceil(cells);
+    let mut counts = vec![0usize; cells];
+    Ok(select_spread(&candidates, config, |u, v| {
+        let count = &mut counts[cell_of(u, v)];
+        *count += 1;
+        *count <= per_cell
+    }))
+}
+
+/// The cells of [`CornerConfig::grid_cells`] over the candidate area.
+struct CornerGrid {
+    origin: (u32, u32),
+    columns: u32,
+    cell_size: (u32, u32),
+    cells: usize,
+}
+
+impl CornerGrid {
+    /// The cell of a pixel of the candidate area, row-major.
+    fn cell(&self, u: u32, v: u32) -> usize {
+        let column = ((u - self.origin.0) / self.cell_size.0).min(self.columns - 1);
+        let row = (v - self.origin.1) / self.cell_size.1;
+        ((row * self.columns + column) as usize).min(self.cells - 1)
+    }
 }
 
 /// The tight bounds of the pixels of `mask` equal to `id`.
@@ -250,7 +299,11 @@ fn mask_bounds(mask: &MaskImage, id: u16) -> Option<PixelRect> {
 
 /// Greedy selection, strongest first, of candidates at least `min_distance_px` apart, using a
 /// grid of cells one minimum distance wide.
-fn select_spread(candidates: &[(f32, u32, u32)], config: &CornerConfig) -> Vec<Corner> {
+fn select_spread(
+    candidates: &[(f32, u32, u32)],
+    config: &CornerConfig,
+    mut admit: impl FnMut(u32, u32) -> bool,
+) -> Vec<Corner> {
     let min_d = config.min_distance_px;
     let cell = min_d.max(1.0);
     let mut taken: std::collections::HashMap<(i64, i64), Vec<Point2<f32>>> =
@@ -266,7 +319,7 @@ fn select_spread(candidates: &[(f32, u32, u32)], config: &CornerConfig) -> Vec<C
                     .is_some_and(|pts| pts.iter().any(|q| (q - p).norm() < min_d))
             })
         });
-        if near {
+        if near || !admit(u, v) {
             continue;
         }
         taken.entry((cu, cv)).or_default().push(p);
@@ -453,6 +506,40 @@ mod tests {
                 assert!((a.position - b.position).norm() >= 15.0);
             }
         }
+    }
+
+    #[test]
+    fn a_grid_spreads_corners_over_weak_texture() {
+        // Strong squares on the left half, the same pattern at a tenth of the contrast on the
+        // right: the strongest 20 corners all sit on the left, a 2×1 grid keeps 10 on each side.
+        let mut img = checkerboard(80, 40);
+        for v in 0..40 {
+            for u in 40..80 {
+                let p = img.get_mut(u, v).unwrap();
+                *p = 0.45 + 0.1 * *p;
+            }
+        }
+        let strongest = CornerConfig {
+            max_corners: 20,
+            ..CornerConfig::default()
+        };
+        let right = |corners: &[Corner]| corners.iter().filter(|c| c.position.x > 42.0).count();
+        let plain = detect_corners(&img, &strongest, &CornerRegion::Whole).unwrap();
+        assert!(plain.len() >= 9, "{}", plain.len());
+        assert_eq!(right(&plain), 0);
+        let gridded = CornerConfig {
+            grid_cells: Some([2, 1]),
+            ..strongest
+        };
+        let spread = detect_corners(&img, &gridded, &CornerRegion::Whole).unwrap();
+        // The right half has 3 × 3 interior corners.
+        assert_eq!(right(&spread), 9, "{spread:?}");
+        assert!(spread.len() - right(&spread) <= 10);
+        let bad = CornerConfig {
+            grid_cells: Some([0, 2]),
+            ..CornerConfig::default()
+        };
+        assert!(bad.validate().is_err());
     }
 
     #[test]

@@ -45,6 +45,11 @@ pub struct KltConfig {
     /// Reject a track whose forward–backward round trip misses its start by more than this,
     /// px; `None` disables the check. Default 0.5 px.
     pub max_forward_backward_px: Option<f32>,
+    /// Compare each window after matching its brightness to the template's (the same mean and
+    /// standard deviation over the samples both define): a gain and bias per window, which an
+    /// auto-exposure change or a light change between frames would otherwise turn into
+    /// residual. Default false (the simulated sensor's exposure is fixed).
+    pub compensate_brightness: bool,
 }
 
 impl Default for KltConfig {
@@ -57,6 +62,7 @@ impl Default for KltConfig {
             min_eigenvalue: 1e-6,
             max_mean_residual: 0.1,
             max_forward_backward_px: Some(0.5),
+            compensate_brightness: false,
         }
     }
 }
@@ -758,7 +764,20 @@ fn track_one(
     }
     // The scratch holds the level-0 template at `p0` (level 0 was refined last).
     let unwarped = *linear == Matrix2::identity();
-    let residual = if !scratch.complete {
+    let residual = if config.compensate_brightness {
+        if unwarped {
+            sample_window_or_nan(j0, q.x, q.y, half, &mut scratch.patch);
+        } else {
+            sample_window_warped(j0, q.x, q.y, linear, half, &mut scratch.patch);
+        }
+        for (sample, &valid) in scratch.patch.iter_mut().zip(&scratch.valid) {
+            if !valid {
+                *sample = f32::NAN;
+            }
+        }
+        match_brightness(&mut scratch.patch, &scratch.t, &scratch.valid);
+        masked_mean_abs_difference(&scratch.patch, &scratch.t)
+    } else if !scratch.complete {
         mean_residual(&prev.levels[0], j0, p0, q, linear, half)
     } else if unwarped && sample_window(j0, q.x, q.y, half, &mut scratch.patch) {
         abs_difference_sum(&scratch.patch, &scratch.t) / scratch.t.len() as f32
@@ -812,11 +831,19 @@ fn refine_level(
     let inv = [gyy / det, -gxy / det, gxx / det];
     let unwarped = *linear == Matrix2::identity();
     let Scratch {
-        t, gx, gy, patch, ..
+        t,
+        gx,
+        gy,
+        patch,
+        valid,
+        ..
     } = scratch;
     for _ in 0..config.max_iterations {
         let (x, y) = (p.x + d.x, p.y + d.y);
         let (bx, by) = if unwarped && sample_window(j_img, x, y, half, patch) {
+            if config.compensate_brightness {
+                match_brightness(patch, t, valid);
+            }
             gradient_error_sums(patch, t, gx, gy)
         } else {
             // The window reaches past the border or is deformed: samples are taken one by
@@ -825,6 +852,9 @@ fn refine_level(
                 sample_window_or_nan(j_img, x, y, half, patch);
             } else {
                 sample_window_warped(j_img, x, y, linear, half, patch);
+            }
+            if config.compensate_brightness {
+                match_brightness(patch, t, valid);
             }
             masked_gradient_error_sums(patch, t, gx, gy)
         };
@@ -970,6 +1000,35 @@ fn sample_window_warped(
     }
 }
 
+/// Maps the samples of `patch` affinely so that, over the samples both windows define (`valid`
+/// template samples, non-NaN patch samples), their mean and standard deviation equal the
+/// template's `t`. Leaves `patch` as it is when the overlap is flat or empty.
+fn match_brightness(patch: &mut [f32], t: &[f32], valid: &[bool]) {
+    let (mut n, mut sp, mut spp, mut st, mut stt) = (0.0f32, 0.0f32, 0.0f32, 0.0f32, 0.0f32);
+    for ((&j, &tv), &ok) in patch.iter().zip(t).zip(valid) {
+        if ok && !j.is_nan() {
+            n += 1.0;
+            sp += j;
+            spp += j * j;
+            st += tv;
+            stt += tv * tv;
+        }
+    }
+    if n < 2.0 {
+        return;
+    }
+    let (mean_p, mean_t) = (sp / n, st / n);
+    let var_p = spp / n - mean_p * mean_p;
+    let var_t = stt / n - mean_t * mean_t;
+    if !(var_p > 1e-8 && var_t > 1e-8) {
+        return;
+    }
+    let gain = (var_t / var_p).sqrt();
+    for j in patch.iter_mut() {
+        *j = (*j - mean_p) * gain + mean_t;
+    }
+}
+
 /// Window positions at least this far from the origin, px, are outside any image.
 const FAR_PX: f32 = 1e9;
 
@@ -1054,6 +1113,58 @@ mod tests {
             assert!((t.position.y - p.y - dy).abs() < 0.02, "{t:?}");
             assert!(t.forward_backward_px < 0.05);
         }
+    }
+
+    #[test]
+    fn brightness_compensation_tracks_through_an_exposure_change() {
+        // The next image is the shifted texture at 60% gain and +0.15 bias (an auto-exposure
+        // step): plain KLT's residual test rejects the matches, the compensated one recovers
+        // the shift.
+        let (dx, dy) = (3.4f32, -2.2f32);
+        let prev = image(200, 160, texture);
+        let next = image(200, 160, |x, y| 0.6 * texture(x - dx, y - dy) + 0.15);
+        let points: Vec<_> = detect_corners(
+            &prev,
+            &CornerConfig {
+                max_corners: 30,
+                min_distance_px: 10.0,
+                ..CornerConfig::default()
+            },
+            &CornerRegion::Rect(crate::features::PixelRect {
+                u_min: 40,
+                v_min: 40,
+                u_max: 160,
+                v_max: 120,
+            }),
+        )
+        .unwrap()
+        .iter()
+        .map(|c| c.position)
+        .collect();
+        assert!(points.len() >= 10);
+        let (prev, next) = (KltPyramid::new(&prev, 3), KltPyramid::new(&next, 3));
+        let plain = KltConfig {
+            max_mean_residual: 0.02,
+            ..KltConfig::default()
+        };
+        let tracked = |config: &KltConfig| {
+            track_points(&prev, &next, &points, config)
+                .unwrap()
+                .into_iter()
+                .zip(&points)
+                .filter(|(t, p)| {
+                    t.status == KltStatus::Tracked
+                        && (t.position.x - p.x - dx).abs() < 0.05
+                        && (t.position.y - p.y - dy).abs() < 0.05
+                })
+                .count()
+        };
+        assert_eq!(tracked(&plain), 0);
+        let compensated = KltConfig {
+            compensate_brightness: true,
+            ..plain
+        };
+        assert_eq!(tracked(&compensated), points.len());
     }
 
     #[test]

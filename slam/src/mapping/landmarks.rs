@@ -14,6 +14,10 @@
 //! re-triangulated from its pixels and depths with the odometry poses, which sharpens the next
 //! prediction.
 //!
+//! Without a ROI (a handheld sequence of a whole scene) new corners are spread over the frame by
+//! a grid (`whole_frame_grid_cells`), so the adjustment sees the whole view, not its most
+//! textured patch.
+//!
 //! New corners are detected inside the image rectangle that the ROI projects to, away from the
 //! landmarks observed in the keyframe, where the depth is valid and smooth around the corner
 //! (no silhouettes) and the back-projected point lies inside the ROI (grown by
@@ -42,8 +46,10 @@ pub struct LandmarkConfig {
     pub corners: CornerConfig,
     /// KLT from a landmark's anchor keyframe into a later one, started at the predicted pixel
     /// with the predicted window warp. Default: [`KltConfig::default`] with 2 pyramid levels
-    /// (the odometry predicts within a pixel or two) and a 15 px window (about 15 cm of rock at
-    /// 4 m: small enough for the plane model of the warp, large enough for sub-pixel matches).
+    /// (the odometry predicts within a pixel or two), a 15 px window (about 15 cm of rock at
+    /// 4 m: small enough for the plane model of the warp, large enough for sub-pixel matches)
+    /// and brightness compensation (keyframes seconds apart on a real camera differ in
+    /// exposure).
     pub klt: KltConfig,
     /// New corners are not started within this distance of a landmark observed in the same
     /// keyframe, pixels. Default 8.
@@ -80,6 +86,10 @@ pub struct LandmarkConfig {
     /// Pixel and depth σ used when re-triangulating a landmark between keyframes. Default
     /// 0.5 px, 0.045 m (the default sensor's depth σ at 4.5 m).
     pub triangulation_noise: KeyframeNoise,
+    /// Without a ROI, and unless `corners.grid_cells` is set, new corners are spread over this
+    /// grid of `[columns, rows]` cells of the frame. Default `[8, 6]` (80 px cells at 640×480,
+    /// a share of 9 corners each).
+    pub whole_frame_grid_cells: [u32; 2],
 }
 
 impl Default for LandmarkConfig {
@@ -93,6 +103,7 @@ impl Default for LandmarkConfig {
             klt: KltConfig {
                 window_px: 15,
                 pyramid_levels: 2,
+                compensate_brightness: true,
                 ..KltConfig::default()
             },
             min_track_distance_px: 8.0,
@@ -108,6 +119,7 @@ impl Default for LandmarkConfig {
                 pixel_sigma_px: 0.5,
                 depth_sigma_m: 0.045,
             },
+            whole_frame_grid_cells: [8, 6],
         }
     }
 }
@@ -342,7 +354,14 @@ fn start_tracks(
     }
     let mask = usable_mask(camera, view, roi, config.roi_margin_m);
     let region = CornerRegion::Mask { mask: &mask, id: 1 };
-    let corners = detect_corners(view.gray, &config.corners, &region)?;
+    let corner_config = match (roi, config.corners.grid_cells) {
+        (None, None) => &CornerConfig {
+            grid_cells: Some(config.whole_frame_grid_cells),
+            ..config.corners.clone()
+        },
+        _ => &config.corners,
+    };
+    let corners = detect_corners(view.gray, corner_config, &region)?;
     let min_d2 = (config.min_track_distance_px * config.min_track_distance_px) as f32;
     for corner in corners {
         let p = corner.position;
@@ -489,6 +508,12 @@ fn validate(config: &LandmarkConfig) -> Result<(), MappingError> {
         if !(value.is_finite() && value >= 0.0) {
             return bad(field, "must be finite and non-negative");
         }
+    }
+    if config.whole_frame_grid_cells.contains(&0) {
+        return bad(
+            "whole_frame_grid_cells",
+            "needs at least one column and one row",
+        );
     }
     if !(config.max_view_angle_deg > 0.0 && config.max_view_angle_deg <= 90.0) {
         return bad("max_view_angle_deg", "must be in (0, 90]");

@@ -7,7 +7,8 @@
 //! - odometry relative-pose priors between consecutive keyframes, with the odometry's
 //!   information (scaled by `odometry_information_scale`);
 //! - GPS/IMU absolute priors from the state estimate on every keyframe, which fix the gauge and
-//!   keep the geo-reference.
+//!   keep the geo-reference; a sequence with no state estimate (a handheld RGB-D camera) instead
+//!   holds its first keyframe at its odometry pose, which fixes the gauge alone.
 //!
 //! After a first solve, observations that reproject farther than `reject_residual_px` are
 //! dropped and the adjustment is solved again.
@@ -110,7 +111,8 @@ pub struct KeyframeSet {
     pub frames: Vec<RgbdFrame>,
     /// Their poses from odometry.
     pub world_from_camera_odometry: Vec<Isometry3<f64>>,
-    /// Their poses from the state estimator (GPS/IMU).
+    /// Their poses from the state estimator (GPS/IMU), one per keyframe; empty when the
+    /// sequence has no state estimate (then the first keyframe is held at its odometry pose).
     pub world_from_camera_estimate: Vec<Isometry3<f64>>,
     /// Covariance of the odometry motion from keyframe k − 1 to keyframe k, as a right
     /// perturbation (translation m, rotation rad) of `camera_{k−1}_from_camera_k`
@@ -249,12 +251,13 @@ pub fn refine_keyframes(
     let n = keyframes.frames.len();
     if n == 0
         || keyframes.world_from_camera_odometry.len() != n
-        || keyframes.world_from_camera_estimate.len() != n
+        || !(keyframes.world_from_camera_estimate.is_empty()
+            || keyframes.world_from_camera_estimate.len() == n)
         || keyframes.odometry_covariance.len() != n
     {
         return Err(MappingError::InvalidInput(format!(
             "keyframe set: {n} frames, {} odometry poses, {} estimates, {} covariances (all must \
-             match and be non-zero)",
+             match and be non-zero; estimates may also be absent)",
             keyframes.world_from_camera_odometry.len(),
             keyframes.world_from_camera_estimate.len(),
             keyframes.odometry_covariance.len()
@@ -383,8 +386,29 @@ pub fn refine_keyframes(
     })
 }
 
-/// GPS/IMU priors: every keyframe's state estimate, isotropic σ in translation and rotation.
+/// σ of the prior that holds the first keyframe at its odometry pose when there is no state
+/// estimate, metres and degrees: tight enough to fix the gauge (the solution's frame) and loose
+/// enough to keep the normal equations well conditioned.
+const GAUGE_SIGMA_M: f64 = 1e-4;
+const GAUGE_SIGMA_DEG: f64 = 1e-3;
+
+/// GPS/IMU priors: every keyframe's state estimate, isotropic σ in translation and rotation; with
+/// no estimate, the first keyframe held at its odometry pose (the gauge).
 fn absolute_priors(keyframes: &KeyframeSet, config: &RefineConfig) -> Vec<AbsolutePosePrior> {
+    if keyframes.world_from_camera_estimate.is_empty() {
+        let t = GAUGE_SIGMA_M.powi(-2);
+        let r = GAUGE_SIGMA_DEG.to_radians().powi(-2);
+        return keyframes
+            .world_from_camera_odometry
+            .first()
+            .map(|first| AbsolutePosePrior {
+                camera: 0,
+                world_from_camera: *first,
+                information: Matrix6::from_diagonal(&nalgebra::Vector6::new(t, t, t, r, r, r)),
+            })
+            .into_iter()
+            .collect();
+    }
     let t = 1.0 / (config.gps_sigma_m * config.gps_sigma_m);
     let r = 1.0 / config.attitude_sigma_deg.to_radians().powi(2);
     let information = Matrix6::from_diagonal(&nalgebra::Vector6::new(t, t, t, r, r, r));

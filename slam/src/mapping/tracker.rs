@@ -1,9 +1,13 @@
 //! Frame-to-model tracking: each new frame is tracked against a raycast of the TSDF being built
 //! (at the previous frame's pose), then fused at the pose found.
 //!
-//! The initial guess is the state estimator's relative motion since the previous frame. When the
-//! odometry flags its result as untrustworthy, the frame is placed with that relative motion
-//! instead (composed onto the previous tracked pose) and still fused.
+//! The initial guess is the state estimator's relative motion since the previous frame
+//! ([`ModelTracker::process`]), or, for a camera with no state estimate (a handheld RGB-D
+//! sequence), the previous frame's tracked motion: a constant-velocity model
+//! ([`ModelTracker::process_unaided`]). When the odometry flags its result as untrustworthy, the
+//! frame is placed with that guessed motion instead (composed onto the previous tracked pose); it
+//! is still fused when the guess came from a state estimate, and skipped (never fused) when it
+//! was only the constant-velocity guess, which a failed frame has no way to check.
 //!
 //! The tracker also accumulates the covariance of the motion since the last keyframe (the
 //! inverse odometry information of each frame, moved to the keyframe pair's frame with the SE(3)
@@ -95,8 +99,10 @@ pub struct TrackedFrame {
     /// The odometry's result (`None` for the first frame, which has no model to track against).
     /// Its `reference_from_current` is relative to the previous frame's fused pose.
     pub odometry: Option<OdometryResult>,
-    /// The odometry failed and the estimator's motion was used.
+    /// The odometry failed and the guessed motion was used.
     pub fell_back: bool,
+    /// The frame was fused into the model (false for an unaided frame whose odometry failed).
+    pub fused: bool,
     /// Why the frame became a keyframe, or `None`.
     pub keyframe: Option<KeyframeReason>,
     /// For a keyframe after the first: the covariance of the tracked motion since the previous
@@ -128,8 +134,13 @@ pub struct ModelTracker {
     config: ModelTrackingConfig,
     volume: TsdfVolume,
     selector: KeyframeSelector,
-    /// The previous frame's fused pose and its state estimate.
-    previous: Option<(Isometry3<f64>, Isometry3<f64>)>,
+    /// The previous frame's fused pose.
+    previous: Option<Isometry3<f64>>,
+    /// The previous frame's state estimate (frames given one).
+    previous_estimate: Option<Isometry3<f64>>,
+    /// The previous frame's motion, `previous_from_current` of the frame before it (the
+    /// constant-velocity guess of [`ModelTracker::process_unaided`]).
+    last_motion: Isometry3<f64>,
     /// Covariance of the motion since the last keyframe (right perturbation).
     covariance_since_keyframe: Matrix6<f64>,
     /// The last keyframe as a reference (keyframe mode) and its pose.
@@ -146,6 +157,7 @@ impl ModelTracker {
     pub fn new(camera: PinholeCamera, config: ModelTrackingConfig) -> Result<Self, MappingError> {
         camera.validate().map_err(MappingError::Camera)?;
         config.odometry.validate()?;
+        config.keyframes.validate().map_err(MappingError::Camera)?;
         for (field, value) in [
             ("fallback_sigma_m", config.fallback_sigma_m),
             ("fallback_sigma_deg", config.fallback_sigma_deg),
@@ -164,6 +176,8 @@ impl ModelTracker {
             config,
             volume,
             previous: None,
+            previous_estimate: None,
+            last_motion: Isometry3::identity(),
             covariance_since_keyframe: Matrix6::zeros(),
             keyframe: None,
             frames: 0,
@@ -194,14 +208,51 @@ impl ModelTracker {
     ) -> Result<TrackedFrame, MappingError> {
         check_finite_isometry(world_from_camera_estimate, "world_from_camera_estimate")
             .map_err(MappingError::Camera)?;
+        let motion = self
+            .previous_estimate
+            .map(|previous| previous.inverse() * world_from_camera_estimate);
+        let tracked = self.process_with_motion(frame, world_from_camera_estimate, motion, true)?;
+        self.previous_estimate = Some(*world_from_camera_estimate);
+        Ok(tracked)
+    }
+
+    /// Tracks `frame` with no state estimate: the first frame is placed at
+    /// `world_from_first_camera` (the map's gauge; ignored afterwards), and each later frame's
+    /// guess is the previous frame's motion (constant velocity). Mixing this with
+    /// [`ModelTracker::process`] in one sequence guesses from the last frame that had an
+    /// estimate.
+    ///
+    /// # Errors
+    /// As [`ModelTracker::process`]; a non-finite `world_from_first_camera` is an error.
+    pub fn process_unaided(
+        &mut self,
+        frame: &RgbdFrame,
+        world_from_first_camera: &Isometry3<f64>,
+    ) -> Result<TrackedFrame, MappingError> {
+        check_finite_isometry(world_from_first_camera, "world_from_first_camera")
+            .map_err(MappingError::Camera)?;
+        let motion = self.previous.map(|_| self.last_motion);
+        self.process_with_motion(frame, world_from_first_camera, motion, false)
+    }
+
+    /// Tracks `frame` from the guess `previous_from_current_guess` (`None` for the first frame,
+    /// placed at `world_from_first_camera`), fuses it and offers it as a keyframe. A frame whose
+    /// odometry failed is fused only when `fuse_on_guess` (the guess is a state estimate).
+    fn process_with_motion(
+        &mut self,
+        frame: &RgbdFrame,
+        world_from_first_camera: &Isometry3<f64>,
+        previous_from_current_guess: Option<Isometry3<f64>>,
+        fuse_on_guess: bool,
+    ) -> Result<TrackedFrame, MappingError> {
         let index = self.frames;
         let odometry_config = &self.config.odometry;
         let pyramid = frame_pyramid(frame, odometry_config.levels);
         let (world_from_camera, odometry, fell_back, odometry_ms) = match self.previous {
-            None => (*world_from_camera_estimate, None, false, None),
-            Some((world_from_previous, previous_estimate)) => {
+            None => (*world_from_first_camera, None, false, None),
+            Some(world_from_previous) => {
                 let started = Instant::now();
-                let motion = previous_estimate.inverse() * world_from_camera_estimate;
+                let motion = previous_from_current_guess.unwrap_or_else(Isometry3::identity);
                 let source = SourceFrame::from_pyramid(&self.camera, &pyramid, odometry_config)?;
                 // The reference and its pose: the model seen from the previous frame, or the
                 // last keyframe.
@@ -261,8 +312,11 @@ impl ModelTracker {
             }
         };
         let started = Instant::now();
-        self.volume
-            .integrate(frame, &self.camera, &world_from_camera)?;
+        let fused = !fell_back || fuse_on_guess;
+        if fused {
+            self.volume
+                .integrate(frame, &self.camera, &world_from_camera)?;
+        }
         let integrate_ms = started.elapsed().as_secs_f64() * 1e3;
         let mut keyframe = self.selector.offer(&world_from_camera, &frame.depth_m);
         if fell_back && keyframe.is_none() {
@@ -283,13 +337,17 @@ impl ModelTracker {
                 ));
             }
         }
-        self.previous = Some((world_from_camera, *world_from_camera_estimate));
+        if let Some(world_from_previous) = self.previous {
+            self.last_motion = renormalized(&(world_from_previous.inverse() * world_from_camera));
+        }
+        self.previous = Some(world_from_camera);
         self.frames += 1;
         Ok(TrackedFrame {
             index,
             world_from_camera,
             odometry,
             fell_back,
+            fused,
             keyframe,
             keyframe_covariance,
             odometry_ms,
@@ -385,6 +443,68 @@ mod tests {
         let e = left.inverse() * right;
         assert!(e.translation.vector.norm() < 1e-10, "{e:?}");
         assert!(e.rotation.angle() < 1e-10);
+    }
+
+    #[test]
+    fn an_unaided_frame_that_fails_is_not_fused() {
+        // A textured wall at 2 m, then a frame that sees depth only in a 10×10 patch at 1 m:
+        // too few correspondences, so the odometry fails. Unaided, the guessed pose has nothing
+        // behind it and the frame is skipped; with a state estimate it is fused there.
+        let camera = PinholeCamera::new(100.0, 100.0, 79.5, 59.5, 160, 120).unwrap();
+        let pixels = || (0..120u32).flat_map(|v| (0..160u32).map(move |u| (u, v)));
+        let rgb = crate::image::Image::from_vec(
+            160,
+            120,
+            pixels()
+                .map(|(u, v)| {
+                    let c = ((u / 8 + v / 8) % 2 * 200 + 30) as u8;
+                    [c, c, c]
+                })
+                .collect(),
+        )
+        .unwrap();
+        let wall = RgbdFrame::new(
+            0.0,
+            rgb.clone(),
+            crate::image::Image::filled(160, 120, 2.0f32),
+            None,
+        )
+        .unwrap();
+        let patch = crate::image::Image::from_vec(
+            160,
+            120,
+            pixels()
+                .map(|(u, v)| {
+                    if (70..80).contains(&u) && (50..60).contains(&v) {
+                        1.0f32
+                    } else {
+                        0.0
+                    }
+                })
+                .collect(),
+        )
+        .unwrap();
+        let stray = RgbdFrame::new(0.1, rgb, patch, None).unwrap();
+        let config = ModelTrackingConfig {
+            tsdf: TsdfConfig {
+                voxel_size_m: 0.05,
+                ..TsdfConfig::default()
+            },
+            ..ModelTrackingConfig::default()
+        };
+        let first = Isometry3::identity();
+        let mut unaided = ModelTracker::new(camera, config.clone()).unwrap();
+        assert!(unaided.process_unaided(&wall, &first).unwrap().fused);
+        let blocks = unaided.volume().stats().blocks;
+        let tracked = unaided.process_unaided(&stray, &first).unwrap();
+        assert!(tracked.fell_back && !tracked.fused);
+        assert_eq!(unaided.volume().stats().blocks, blocks);
+
+        let mut aided = ModelTracker::new(camera, config).unwrap();
+        aided.process(&wall, &first).unwrap();
+        let tracked = aided.process(&stray, &first).unwrap();
+        assert!(tracked.fell_back && tracked.fused);
+        assert!(aided.volume().stats().blocks > blocks);
     }
 
     #[test]

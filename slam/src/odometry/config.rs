@@ -73,6 +73,11 @@ pub struct OdometryConfig {
     /// Current-frame points handled per parallel chunk; partial sums are added in chunk order,
     /// so results do not depend on the thread count. Default 4096.
     pub chunk_points: usize,
+    /// Compare intensities through a gain and bias (`reference ≈ gain · current + bias`),
+    /// refitted after every linearisation on the correspondences whose point-to-plane residual
+    /// is an inlier: a real camera's auto-exposure changes brightness between frames, which
+    /// would otherwise read as photometric error. Default true.
+    pub estimate_brightness: bool,
 }
 
 impl Default for OdometryConfig {
@@ -101,6 +106,7 @@ impl Default for OdometryConfig {
             max_correction_deg: 15.0,
             max_points_per_level: 30_000,
             chunk_points: 4096,
+            estimate_brightness: true,
         }
     }
 }

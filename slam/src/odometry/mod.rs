@@ -172,6 +172,13 @@ pub fn frame_pyramid(frame: &RgbdFrame, levels: usize) -> ImagePyramid {
     ImagePyramid::new(gray_from_rgb(&frame.rgb), frame.depth_m.clone(), levels)
 }
 
+/// Fewest geometric inliers that the brightness fit of [`OdometryConfig::estimate_brightness`]
+/// needs.
+const MIN_BRIGHTNESS_SAMPLES: usize = 100;
+/// The brightness gain is kept within [`MIN_GAIN`, 1 / `MIN_GAIN`] (an exposure change of more
+/// than a factor of two between frames is a failure, not a gain).
+const MIN_GAIN: f64 = 0.5;
+
 /// Tracks `current` against `reference`, starting from `initial_reference_from_current` (the
 /// state estimator's relative motion).
 ///
@@ -226,13 +233,21 @@ pub fn track(
     let mut estimate = guess;
     let mut iterations = 0;
     let mut finest = NormalEquations::default();
+    // `reference ≈ gain · current + bias`, refitted after every linearisation on the geometric
+    // inliers (an exposure change is then not an intensity residual).
+    let mut brightness = (1.0, 0.0);
     for level in (0..config.levels).rev() {
         let ref_level = &reference.levels[level];
         let points = &current.levels[level];
         let mut last_cost_per_point = f64::INFINITY;
         for _ in 0..config.iterations_at(level) {
-            let eq = normal_equations(ref_level, points, &estimate, config);
+            let eq = normal_equations(ref_level, points, &estimate, brightness, config);
             iterations += 1;
+            if config.estimate_brightness
+                && let Some((gain, bias)) = eq.brightness_fit(MIN_BRIGHTNESS_SAMPLES)
+            {
+                brightness = (gain.clamp(MIN_GAIN, 1.0 / MIN_GAIN), bias);
+            }
             let cost_per_point = eq.cost / eq.correspondences.max(1) as f64;
             if eq.correspondences < 6 {
                 finest = eq;

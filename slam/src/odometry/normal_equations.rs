@@ -27,9 +27,29 @@ pub(crate) struct NormalEquations {
     pub inliers: usize,
     /// Σ of the correspondences' reference depths (for the degeneracy test's scale).
     pub depth_sum: f64,
+    /// Sums over the geometric inliers with a photometric sample, for the brightness fit
+    /// `reference ≈ gain · current + bias`: count, Σc, Σr, Σc², Σc·r (c current intensity, r
+    /// reference intensity).
+    pub brightness: [f64; 5],
 }
 
 impl NormalEquations {
+    /// The least-squares `(gain, bias)` of `reference ≈ gain · current + bias` over the
+    /// geometric inliers, or `None` with fewer than `min_samples` of them or no contrast.
+    pub fn brightness_fit(&self, min_samples: usize) -> Option<(f64, f64)> {
+        let [n, c, r, cc, cr] = self.brightness;
+        if n < min_samples as f64 {
+            return None;
+        }
+        let variance = cc / n - (c / n).powi(2);
+        if !(variance > 1e-6) {
+            return None;
+        }
+        let gain = (cr / n - c / n * (r / n)) / variance;
+        let bias = r / n - gain * c / n;
+        (gain.is_finite() && bias.is_finite()).then_some((gain, bias))
+    }
+
     fn add(&mut self, other: &Self) {
         for (a, b) in self.h.iter_mut().zip(other.h.iter()) {
             *a += b;
@@ -41,6 +61,9 @@ impl NormalEquations {
         self.correspondences += other.correspondences;
         self.inliers += other.inliers;
         self.depth_sum += other.depth_sum;
+        for (a, b) in self.brightness.iter_mut().zip(other.brightness.iter()) {
+            *a += b;
+        }
     }
 
     /// H as a full symmetric matrix.
@@ -71,6 +94,7 @@ struct ChunkSums {
     correspondences: usize,
     inliers: usize,
     depth_sum: f32,
+    brightness: [f32; 5],
 }
 
 impl ChunkSums {
@@ -82,6 +106,7 @@ impl ChunkSums {
             correspondences: 0,
             inliers: 0,
             depth_sum: 0.0,
+            brightness: [0.0; 5],
         }
     }
 
@@ -106,6 +131,7 @@ impl ChunkSums {
             correspondences: self.correspondences,
             inliers: self.inliers,
             depth_sum: f64::from(self.depth_sum),
+            brightness: self.brightness.map(f64::from),
         }
     }
 }
@@ -148,14 +174,19 @@ struct Weights {
     huber_k: f32,
     inlier_sigmas: f32,
     max_distance_sq: f32,
+    /// The current frame's intensities are compared as `gain · I + bias`.
+    gain: f32,
+    bias: f32,
 }
 
-/// Builds the normal equations of `points` against `reference` at `reference_from_current`.
-/// Chunks are summed in order, so the result is the same for any thread count.
+/// Builds the normal equations of `points` against `reference` at `reference_from_current`,
+/// comparing the current intensities as `gain · I + bias` (`brightness`). Chunks are summed in
+/// order, so the result is the same for any thread count.
 pub(crate) fn normal_equations(
     reference: &ReferenceLevel,
     points: &[SourcePoint],
     reference_from_current: &Isometry3<f64>,
+    brightness: (f64, f64),
     config: &OdometryConfig,
 ) -> NormalEquations {
     let rot = reference_from_current.rotation.to_rotation_matrix();
@@ -178,6 +209,8 @@ pub(crate) fn normal_equations(
         inlier_sigmas: config.inlier_sigmas as f32,
         max_distance_sq: (config.max_correspondence_distance_m
             * config.max_correspondence_distance_m) as f32,
+        gain: brightness.0 as f32,
+        bias: brightness.1 as f32,
     };
     let partials: Vec<NormalEquations> = points
         .par_chunks(config.chunk_points)
@@ -241,6 +274,7 @@ fn accumulate_point(
     let mut inlier = true;
 
     let n = pixels[nearest].normal;
+    let mut geometric_inlier = false;
     if w.geometric_on && (n[0] != 0.0 || n[1] != 0.0 || n[2] != 0.0) {
         let r = n[0] * d[0] + n[1] * d[1] + n[2] * d[2];
         let sigma = w.geometric_sigma_1m * vertex[2] * vertex[2];
@@ -250,6 +284,7 @@ fn accumulate_point(
         sums.add_residual(&jacobian(n, q), r, hw * info);
         sums.cost += loss * w.geometric_info_scale;
         inlier &= e.abs() <= w.inlier_sigmas;
+        geometric_inlier = e.abs() <= w.inlier_sigmas;
     }
 
     let i0 = v0 * reference.width + u0;
@@ -269,7 +304,16 @@ fn accumulate_point(
             let bottom = get(p10) + (get(p11) - get(p10)) * fu;
             top + (bottom - top) * fv
         };
-        let r = bilinear(|p| p.intensity) - intensity;
+        let reference_intensity = bilinear(|p| p.intensity);
+        if geometric_inlier {
+            let b = &mut sums.brightness;
+            b[0] += 1.0;
+            b[1] += intensity;
+            b[2] += reference_intensity;
+            b[3] += intensity * intensity;
+            b[4] += intensity * reference_intensity;
+        }
+        let r = reference_intensity - (w.gain * intensity + w.bias);
         let gu = bilinear(|p| p.grad_u);
         let gv = bilinear(|p| p.grad_v);
         let a0 = gu * fx * inv_z;

@@ -1,0 +1,104 @@
+//! `scarp map --poses odometry --ba` on real handheld Kinect v1 data with no state estimate, no
+//! world and no region of interest: `../shared/data/real/7scenes_redkitchen_50` (50 frames of
+//! Microsoft 7-Scenes, read from `../shared` and never copied into the repository; the test
+//! skips with a message where it is absent).
+//!
+//! The sequence has no `estimate.txt`, so each frame is tracked from the previous frame's
+//! motion, keyframes are chosen by parallax, turn and overlap (the handheld preset), landmarks
+//! are spread over the whole frame, and the bundle adjustment is held only by its first
+//! keyframe. It must gather a real problem (≥ 1000 observations) and give a mesh closer to the
+//! one fused with the ground-truth poses than the odometry's mesh is (F-score at 1 cm).
+//!
+//! Its keyframe ATE is only held within 10% of the odometry's, not required to drop: on this
+//! piece the landmarks agree with the 7-Scenes poses (KinectFusion's, not motion capture) to
+//! 0.8–0.9 px median, while the adjustment fits them to about 0.25 px, so a few tenths of a
+//! millimetre of ATE either way is below what this ground truth resolves (issue 19's note has
+//! the figures; on rendered sequences, with exact ground truth, the same pipeline takes the ATE
+//! from 3.9 to 0.8 mm).
+
+mod common;
+use std::path::PathBuf;
+
+use common::{read_json, scarp_stdout as scarp};
+
+fn redkitchen() -> Option<PathBuf> {
+    let dir =
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data/real/7scenes_redkitchen_50");
+    if dir.join("rgb.txt").is_file() {
+        Some(dir)
+    } else {
+        eprintln!(
+            "skipped: {} is absent (the 7-Scenes piece is read from ../shared, never shipped)",
+            dir.display()
+        );
+        None
+    }
+}
+
+fn number(json: &serde_json::Value, key: &str) -> f64 {
+    json[key]
+        .as_f64()
+        .unwrap_or_else(|| panic!("no number `{key}` in {json}"))
+}
+
+#[test]
+fn bundle_adjustment_on_real_handheld_rgbd() {
+    let Some(sequence) = redkitchen() else {
+        return;
+    };
+    let sequence = sequence.to_string_lossy().into_owned();
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = |name: &str| dir.path().join(name).to_string_lossy().into_owned();
+    let common = ["--voxel", "0.02", "--max-depth", "4"];
+    let map = |poses: &str, extra: &[&str], out: &str| {
+        let mut args = vec!["map", sequence.as_str(), "--poses", poses, "--out", out];
+        args.extend(common);
+        args.extend(extra);
+        scarp(&args);
+    };
+    map("groundtruth", &[], &d("truth"));
+    map("odometry", &["--ba"], &d("ba"));
+    let summary = read_json(&dir.path().join("ba/map.json"));
+    assert_eq!(summary["motion_guess"], "constant_velocity", "{summary}");
+    let observations = number(&summary, "ba_observations");
+    assert!(
+        observations >= 1000.0,
+        "{observations} observations: {summary}"
+    );
+    assert!(number(&summary, "ba_landmarks") >= 100.0, "{summary}");
+    assert!(number(&summary, "ba_final_cost") < number(&summary, "ba_initial_cost"));
+    let before = number(&summary, "ate_rmse_before_ba_m");
+    let after = number(&summary, "ate_rmse_after_ba_m");
+    assert!(after <= 1.1 * before, "keyframe ATE {before} -> {after}");
+    // The odometry itself: within 5.5 mm of the ground truth over all 50 frames.
+    let odometry = number(&summary, "ate_rmse_m");
+    assert!(odometry <= 0.0055, "odometry ATE {odometry}");
+    for file in ["trajectory.txt", "trajectory_ba.txt", "keyframes_ba.txt"] {
+        assert!(dir.path().join("ba").join(file).is_file(), "{file}");
+    }
+
+    // The odometry's own mesh (no --ba) against the refined one, both scored against the mesh
+    // fused with the ground-truth poses.
+    map("odometry", &[], &d("odometry"));
+    let fscore = |mesh: &str| {
+        let out = scarp(&[
+            "eval",
+            "mesh",
+            "--gt",
+            &d("truth/mesh.ply"),
+            "--mesh",
+            mesh,
+            "--tau",
+            "0.01",
+            "--json",
+        ]);
+        let json: serde_json::Value = serde_json::from_str(&out).expect("eval JSON");
+        number(&json, "fscore")
+    };
+    let odometry_f = fscore(&d("odometry/mesh.ply"));
+    let ba_f = fscore(&d("ba/mesh.ply"));
+    assert!(
+        ba_f > odometry_f,
+        "F@1cm against the ground-truth-pose mesh: odometry {odometry_f}, BA {ba_f}"
+    );
+}
