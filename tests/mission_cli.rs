@@ -112,6 +112,27 @@ fn small_world_mission_finds_maps_and_measures_its_target() {
     let geo: serde_json::Value =
         serde_json::from_slice(&std::fs::read(out_dir.join("targets.geojson")).unwrap()).unwrap();
     assert!(!geo["features"].as_array().unwrap().is_empty());
+    // The interactive report: the α table, the target's 3D view with its embedded data and
+    // three.js inline (no file beside it to load), and its α(θ) plot when it was analysed.
+    let html = std::fs::read_to_string(out_dir.join("report.html")).unwrap();
+    for needle in [
+        "id=\"alpha-table\"",
+        &format!("id=\"view-{id}\""),
+        "id=\"scarp-view-data\"",
+        "var THREE=",
+        "window.scarpViewerStats",
+    ] {
+        assert!(html.contains(needle), "report.html lacks {needle}");
+    }
+    assert_eq!(
+        html.contains("class=\"polar\""),
+        t["alpha_min_deg"].as_f64().is_some(),
+        "a polar plot exactly when α_min is known"
+    );
+    assert!(
+        !html.contains("src=\"http"),
+        "report.html must not load anything online"
+    );
 }
 
 /// Runs `scarp simulate` on the small world in `dir` with the mission file `config` (TOML

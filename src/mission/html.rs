@@ -1,6 +1,8 @@
 //! `report.html` and its pictures: a top-down map of the mission (terrain hillshade, the flight
 //! path coloured by mode, targets with their localization ellipses and mapping cylinders),
-//! each mapped target's mesh from four sides and from below, and tables of metrics.
+//! each mapped target's mesh from four sides and from below, and tables of metrics; and the
+//! interactive part ([`super::report_viewer`]): a three.js view of each target's mesh, its
+//! α(θ) polar plot and a table of every target's α with its interval.
 //!
 //! Pictures are PNGs beside the HTML, drawn with plotters into memory (no fonts: the HTML
 //! carries the words) and written atomically.
@@ -287,13 +289,14 @@ pub fn write_report(
         html,
         "<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>scarp mission</title>\
 <style>body{{font-family:sans-serif;margin:2em}}table{{border-collapse:collapse}}\
-td,th{{border:1px solid #bbb;padding:3px 8px;text-align:right}}img{{margin:2px}}</style></head><body>\n\
+td,th{{border:1px solid #bbb;padding:3px 8px;text-align:right}}img{{margin:2px}}{}</style></head><body>\n\
 <h1>scarp mission on world <code>{}</code> (seed {})</h1>\n\
 <p>{}: {} of {} targets mapped; {} distractors mapped; missed true targets: {:?}; collisions: {} camera steps; safety interventions: {}.<br>\
 Simulated {:.0} s in {:.0} s of wall time (real-time factor {:.1}).</p>\n\
 <h2>Map</h2><p>Terrain hillshade; flight path by mode (search blue, fine localization orange, \
 mapping green); true targets red, distractors grey; localization 2σ ellipses purple; mapping \
 cylinders black; collisions red crosses, safety interventions orange triangles.</p><img src=\"map.png\" width=\"700\">\n",
+        super::report_viewer::STYLE,
         report.world,
         report.seed,
         report.end_reason,
@@ -345,6 +348,11 @@ cylinders black; collisions red crosses, safety interventions orange triangles.<
         );
     }
     html.push_str("</table>\n");
+    // The interactive views (three.js, embedded data), the α(θ) plots and the α table.
+    html.push_str(&super::report_viewer::interactive_sections(
+        dir, world, report,
+    ));
+    html.push_str("<h2>Mesh views</h2>\n");
     for t in report.targets.iter().filter(|t| t.status == "mapped") {
         let _ = writeln!(html, "<h3>Target {}</h3><p>", t.id);
         for (name, _) in MESH_VIEWS {

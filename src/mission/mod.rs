@@ -26,5 +26,6 @@ pub mod motion;
 pub mod mount;
 pub mod perception;
 pub mod report;
+pub mod report_viewer;
 pub mod safety;
 pub mod simulation;
