@@ -28,24 +28,28 @@ pub(crate) struct NormalEquations {
     /// Σ of the correspondences' reference depths (for the degeneracy test's scale).
     pub depth_sum: f64,
     /// Sums over the geometric inliers with a photometric sample, for the brightness fit
-    /// `reference ≈ gain · current + bias`: count, Σc, Σr, Σc², Σc·r (c current intensity, r
+    /// `reference ≈ gain · current + bias`: count, Σc, Σr, Σc², Σr² (c current intensity, r
     /// reference intensity).
     pub brightness: [f64; 5],
 }
 
 impl NormalEquations {
-    /// The least-squares `(gain, bias)` of `reference ≈ gain · current + bias` over the
-    /// geometric inliers, or `None` with fewer than `min_samples` of them or no contrast.
+    /// The `(gain, bias)` of `reference ≈ gain · current + bias` that matches the mean and
+    /// standard deviation of the two intensities over the geometric inliers, or `None` with
+    /// fewer than `min_samples` of them or no contrast. Moments, not a regression: while the
+    /// pose is still off, the two intensities correlate less, which would pull a regression's
+    /// gain below 1 and flatten the photometric term; their spreads do not change.
     pub fn brightness_fit(&self, min_samples: usize) -> Option<(f64, f64)> {
-        let [n, c, r, cc, cr] = self.brightness;
+        let [n, c, r, cc, rr] = self.brightness;
         if n < min_samples as f64 {
             return None;
         }
-        let variance = cc / n - (c / n).powi(2);
-        if !(variance > 1e-6) {
+        let variance_c = cc / n - (c / n).powi(2);
+        let variance_r = rr / n - (r / n).powi(2);
+        if !(variance_c > 1e-6 && variance_r > 1e-6) {
             return None;
         }
-        let gain = (cr / n - c / n * (r / n)) / variance;
+        let gain = (variance_r / variance_c).sqrt();
         let bias = r / n - gain * c / n;
         (gain.is_finite() && bias.is_finite()).then_some((gain, bias))
     }
@@ -311,7 +315,7 @@ fn accumulate_point(
             b[1] += intensity;
             b[2] += reference_intensity;
             b[3] += intensity * intensity;
-            b[4] += intensity * reference_intensity;
+            b[4] += reference_intensity * reference_intensity;
         }
         let r = reference_intensity - (w.gain * intensity + w.bias);
         let gu = bilinear(|p| p.grad_u);
