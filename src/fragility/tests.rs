@@ -472,6 +472,32 @@ fn perturbation_spread_is_seeded_and_positive() {
 }
 
 #[test]
+fn a_coarse_box_on_its_base_keeps_a_positive_interval_around_its_angle() {
+    // 8 vertices, 12 triangles: the perturbation study used to re-decide which of the 4 base
+    // corners touch on every noised sample, and reported α_min down to −27.8° for a box that
+    // stands at atan(0.4) = 21.8°.
+    let mesh = to_mesh(&cuboid_solid([0.4, 0.4, 1.0]));
+    let r = analyze(&mesh, ContactSpec::Auto, &FragilityConfig::default()).unwrap();
+    assert_eq!(r.contact_method, ContactMethod::Base);
+    let truth = deg(0.4f64.atan());
+    assert!((r.alpha_min_deg - truth).abs() < 1e-4);
+    assert_eq!(r.uncertainty.failed_samples, 0);
+    assert!(
+        r.alpha_min_low_deg <= truth && truth <= r.alpha_min_high_deg,
+        "[{}, {}]",
+        r.alpha_min_low_deg,
+        r.alpha_min_high_deg
+    );
+    // 2 mm of noise on a 0.4 m base moves the edges by millimetres: a fraction of a degree.
+    assert!(
+        r.alpha_min_low_deg > truth - 1.0 && r.alpha_min_high_deg < truth + 1.0,
+        "[{}, {}]",
+        r.alpha_min_low_deg,
+        r.alpha_min_high_deg
+    );
+}
+
+#[test]
 fn report_json_has_the_interface_fields() {
     let r = analyze(
         &to_mesh(&cuboid_solid([1.0, 1.0, 2.0])),

@@ -9,7 +9,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::topology::Solid;
-use super::{FragilityConfig, Support, evaluate};
+use super::{FragilityConfig, Support, evaluate, rocking};
 
 /// Settings of the perturbation study. The defaults are choices for a rock mapped at about
 /// 1 cm voxels, not values from the paper.
@@ -100,6 +100,30 @@ impl<'a> SampleSupport<'a> {
     }
 }
 
+/// The vertices a rock resting on its own base touches the ground with: those within the
+/// contact band of its lowest point, when the contact is at that base (the support is the rock
+/// itself below a contact at or under its lowest point). `None` for any other contact.
+///
+/// Why: re-deciding which vertices touch on every noised sample turns vertex noise into a
+/// tilt of the whole rock. A coarse base (a box's 4 corners) then often "touches" with 2 or 3
+/// corners, and the study reported negative α_min for a box that stands.
+fn resting_base_vertices(
+    rock: &Solid,
+    contact_height_m: f64,
+    support: &SampleSupport<'_>,
+    config: &FragilityConfig,
+) -> Option<Vec<usize>> {
+    let (z_min, _) = rock.z_range()?;
+    let at_base = matches!(support, SampleSupport::SelfBelow) && contact_height_m <= z_min;
+    if !at_base {
+        return None;
+    }
+    let indices: Vec<usize> = (0..rock.positions.len())
+        .filter(|&i| rock.positions[i].z <= z_min + config.contact_band_m)
+        .collect();
+    (indices.len() >= 3).then_some(indices)
+}
+
 /// Runs the perturbed analyses of `rock` around `contact_height_m` and summarises α_min.
 pub(crate) fn alpha_min_spread(
     rock: &Solid,
@@ -110,6 +134,7 @@ pub(crate) fn alpha_min_spread(
     let u = &config.uncertainty;
     // Noise roughens a flat base; widen the contact band so the base still counts as touching.
     let band = config.contact_band_m.max(3.0 * u.mesh_noise_sigma_m);
+    let base_vertices = resting_base_vertices(rock, contact_height_m, &support, config);
     let results: Vec<Option<f64>> = (0..u.samples)
         .into_par_iter()
         .map(|k| {
@@ -130,15 +155,30 @@ pub(crate) fn alpha_min_spread(
                     .collect(),
                 faces: rock.faces.clone(),
             };
-            evaluate(
-                &noisy,
-                contact_height_m + dh,
-                &support.of(&noisy),
-                band,
-                config,
-            )
-            .ok()
-            .map(|e| e.alpha_min_rad.to_degrees())
+            let evaluation = match &base_vertices {
+                // The rock rests on its base: the noise moves the base's vertices, but the
+                // same vertices keep touching the ground, at their mean height (no cut height
+                // to get wrong).
+                Some(indices) => {
+                    let hull = rocking::convex_hull(
+                        &indices
+                            .iter()
+                            .map(|&i| noisy.positions[i].xy())
+                            .collect::<Vec<_>>(),
+                    );
+                    let h = indices.iter().map(|&i| noisy.positions[i].z).sum::<f64>()
+                        / indices.len() as f64;
+                    evaluate(&noisy, h, &Support::Exact(&hull), band, config)
+                }
+                None => evaluate(
+                    &noisy,
+                    contact_height_m + dh,
+                    &support.of(&noisy),
+                    band,
+                    config,
+                ),
+            };
+            evaluation.ok().map(|e| e.alpha_min_rad.to_degrees())
         })
         .collect();
     let ok: Vec<f64> = results.iter().flatten().copied().collect();
