@@ -44,6 +44,8 @@ pub struct Target {
     pub(crate) misses: u32,
     pub(crate) last_update_world_from_camera: Isometry3<f64>,
     pub(crate) last_track_id: Option<u64>,
+    /// Where the camera was at registration and at every update (world, m).
+    pub(crate) view_positions: Vec<Point3<f64>>,
 }
 
 impl Target {
@@ -71,13 +73,15 @@ impl Target {
             misses: 0,
             last_update_world_from_camera: world_from_camera,
             last_track_id: track_id,
+            view_positions: vec![Point3::from(world_from_camera.translation.vector)],
         })
     }
 
     /// Replaces the points after an update and advances the status: KL of the new fit against
     /// the previous one, the small-KL streak, then Tracking → ReadyForFineLocalization
     /// (h_p < `ready_entropy_nats`) → Converged (`converged_updates` updates in a row with KL ≤
-    /// `converged_kl_nats`, while ready).
+    /// `converged_kl_nats`, while ready, once the views span `converged_min_view_span_deg`
+    /// around the target: see [`Self::view_span_deg`]).
     ///
     /// # Errors
     /// [`super::LocalizationError::TooFewPoints`] when the new points cannot be fitted; the
@@ -95,6 +99,8 @@ impl Target {
         self.last_kl_nats = Some(kl);
         self.updates += 1;
         self.last_update_world_from_camera = world_from_camera;
+        self.view_positions
+            .push(Point3::from(world_from_camera.translation.vector));
         if kl <= config.converged_kl_nats {
             self.small_kl_streak += 1;
         } else {
@@ -112,6 +118,7 @@ impl Target {
         }
         if self.status == TargetStatus::ReadyForFineLocalization
             && self.small_kl_streak >= config.converged_updates
+            && self.view_span_deg() >= config.converged_min_view_span_deg
         {
             self.status = TargetStatus::Converged;
         }
@@ -120,6 +127,20 @@ impl Target {
     /// The catalog's id of this target (1, 2, … in order of registration).
     pub fn id(&self) -> u32 {
         self.id
+    }
+
+    /// The horizontal angle the views of this target span around its centre, degrees in
+    /// [0, 360): 360° less the widest gap between the bearings (from the centre, in the world xy
+    /// plane) of the camera at registration and at every update.
+    pub fn view_span_deg(&self) -> f64 {
+        let c = self.center();
+        let bearings: Vec<f64> = self
+            .view_positions
+            .iter()
+            .filter(|p| (p.x - c.x).hypot(p.y - c.y) > 1e-9)
+            .map(|p| (p.y - c.y).atan2(p.x - c.x).to_degrees())
+            .collect();
+        span_deg(bearings)
     }
 
     /// Current status.
@@ -199,6 +220,23 @@ impl Target {
     }
 }
 
+/// The arc that holds every angle of `bearings_deg`: 360° less the widest gap between
+/// neighbours on the circle; 0 for fewer than two bearings.
+fn span_deg(mut bearings_deg: Vec<f64>) -> f64 {
+    if bearings_deg.len() < 2 {
+        return 0.0;
+    }
+    let wrapped: Vec<f64> = bearings_deg.iter().map(|b| b.rem_euclid(360.0)).collect();
+    bearings_deg = wrapped;
+    bearings_deg.sort_by(f64::total_cmp);
+    let wrap_gap = bearings_deg[0] + 360.0 - bearings_deg[bearings_deg.len() - 1];
+    let widest = bearings_deg
+        .windows(2)
+        .map(|w| w[1] - w[0])
+        .fold(wrap_gap, f64::max);
+    360.0 - widest
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -219,7 +257,11 @@ mod tests {
 
     #[test]
     fn status_moves_to_ready_then_converged() {
-        let cfg = LocalizationConfig::default();
+        // The KL rule alone (the paper's): every view from the same place.
+        let cfg = LocalizationConfig {
+            converged_min_view_span_deg: 0.0,
+            ..LocalizationConfig::default()
+        };
         let mut t = Target::new(1, cube(1.0, 0.0), Isometry3::identity(), Some(4)).unwrap();
         assert_eq!(t.status(), TargetStatus::Tracking);
         // Compact but changing: ready, not converged.
@@ -248,5 +290,42 @@ mod tests {
         t.apply_update(cube(1.0, 0.0), Isometry3::identity(), &cfg)
             .unwrap();
         assert_eq!(t.status(), TargetStatus::Converged);
+    }
+
+    #[test]
+    fn convergence_waits_for_views_from_around_the_target() {
+        let cfg = LocalizationConfig::default();
+        let centre = cube(0.05, 0.0);
+        // A camera 7 m out at `bearing_deg` around the set's centre, 10 m up.
+        let c = Target::new(1, centre.clone(), Isometry3::identity(), None)
+            .unwrap()
+            .center();
+        let at = |bearing_deg: f64| {
+            let b = bearing_deg.to_radians();
+            Isometry3::translation(c.x + 7.0 * b.cos(), c.y + 7.0 * b.sin(), c.z + 10.0)
+        };
+        let mut t = Target::new(1, centre.clone(), at(0.0), None).unwrap();
+        // Unchanging fits seen from within 60° of each other: not converged.
+        for bearing in [20.0, 40.0, 60.0, 50.0] {
+            t.apply_update(centre.clone(), at(bearing), &cfg).unwrap();
+        }
+        assert!(
+            (t.view_span_deg() - 60.0).abs() < 1e-9,
+            "{}",
+            t.view_span_deg()
+        );
+        assert_eq!(t.status(), TargetStatus::ReadyForFineLocalization);
+        // Views reaching 130° around it: converged.
+        t.apply_update(centre.clone(), at(130.0), &cfg).unwrap();
+        assert_eq!(t.status(), TargetStatus::Converged);
+    }
+
+    #[test]
+    fn span_is_measured_across_the_wrap() {
+        assert_eq!(span_deg(vec![]), 0.0);
+        assert_eq!(span_deg(vec![10.0]), 0.0);
+        assert!((span_deg(vec![170.0, -170.0]) - 20.0).abs() < 1e-9);
+        assert!((span_deg(vec![0.0, 90.0, 180.0, 270.0]) - 270.0).abs() < 1e-9);
+        assert!((span_deg(vec![-10.0, 350.0, 10.0]) - 20.0).abs() < 1e-9);
     }
 }
