@@ -35,6 +35,12 @@ pub struct SimulateArgs {
     /// debugging a plan.
     #[arg(long)]
     pub allow_collisions: bool,
+    /// Also record the flight as the drone sensed it into this folder: the TUM RGB-D layout
+    /// with `estimate.txt`, `camera.toml` and `flight.txt` (mount pitch and mode per frame);
+    /// the true poses are kept apart in `groundtruth/`. `scarp process` reads it. Several GB
+    /// for a default mission.
+    #[arg(long)]
+    pub record: Option<PathBuf>,
 }
 
 fn load_config(path: Option<&PathBuf>) -> anyhow::Result<MissionConfig> {
@@ -79,6 +85,7 @@ pub fn run(args: SimulateArgs) -> anyhow::Result<()> {
         out: args.out.clone(),
         stop: &stop,
         started,
+        record: args.record.clone(),
     })?;
     let bar = ProgressBar::new_spinner();
     if let Ok(style) = ProgressStyle::with_template("{spinner} {elapsed} {msg}") {

@@ -25,6 +25,7 @@ pub mod monitor;
 pub mod motion;
 pub mod mount;
 pub mod perception;
+pub mod record;
 pub mod report;
 pub mod report_viewer;
 pub mod safety;

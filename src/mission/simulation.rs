@@ -31,6 +31,7 @@ use super::monitor::{SafetyMonitor, Senses, nearest_depth_m};
 use super::motion::MotionSystem;
 use super::mount::CameraMount;
 use super::perception::{Perception, center_in_box};
+use super::record::FlightRecorder;
 use super::report::{MissionReport, ModeChange, StageTimings};
 use super::safety::SafetyLog;
 
@@ -96,6 +97,8 @@ pub struct MissionInputs<'a> {
     /// When the command started: the reported wall time counts from here, so that loading
     /// the world and planning the search count too (`timings.setup_s`).
     pub started: Instant,
+    /// Record the flight as sensed into this folder (see [`super::record`]).
+    pub record: Option<PathBuf>,
 }
 
 /// Progress of a running mission, for a progress bar.
@@ -145,6 +148,8 @@ pub struct Mission<'a> {
     /// Per perception target: the sum of the estimator's position error (estimate − truth) over
     /// the frames that updated its localization, and their count (ground-truth bookkeeping).
     estimator_error_by_target: EstimatorErrorByTarget,
+    /// Writes the flight as sensed (`--record`).
+    recorder: Option<FlightRecorder>,
 }
 
 impl<'a> Mission<'a> {
@@ -189,7 +194,13 @@ impl<'a> Mission<'a> {
         motion.follow(&waypoints[1..], &env, &config.planning)?;
         let perception = Perception::new(world, config, inputs.seed)?;
         let estimator = StateEstimator::new(&config.estimator, derive_seed(inputs.seed, 0x5e57));
+        let recorder = inputs
+            .record
+            .as_deref()
+            .map(|dir| FlightRecorder::new(dir, &camera))
+            .transpose()?;
         Ok(Self {
+            recorder,
             camera,
             mount: CameraMount::new(cam),
             ring_plan: None,
@@ -365,6 +376,16 @@ impl<'a> Mission<'a> {
         let clock = Instant::now();
         let frame = self.take_frame(t, &truth)?;
         timings.render_s += clock.elapsed().as_secs_f64();
+        if let Some(recorder) = self.recorder.as_mut() {
+            recorder.record(
+                &frame,
+                &estimate,
+                &truth,
+                self.mount.pitch_down_deg(),
+                self.mode,
+                self.inputs.world,
+            )?;
+        }
         self.watch_clearance(t, &position, &frame);
 
         match self.mode {
@@ -937,6 +958,14 @@ impl<'a> Mission<'a> {
         );
         timings.evaluation_s += clock.elapsed().as_secs_f64();
         self.write_trajectories(&out)?;
+        if let Some(recorder) = self.recorder.take() {
+            let dir = self.inputs.record.clone().unwrap_or_default();
+            let frames = recorder.finish()?;
+            tracing::info!(
+                "recorded {frames} frames of the flight in {}",
+                dir.display()
+            );
+        }
         let sim = self.motion.time_s();
         let wall_s = wall.elapsed().as_secs_f64();
         self.report.sim_time_s = sim;

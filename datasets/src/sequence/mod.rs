@@ -19,4 +19,4 @@ pub use images::{
 };
 pub use lists::{BoxRecord, boxes_from_mask, format_boxes, parse_boxes};
 pub use read::{MAX_ASSOCIATION_DT_S, Sequence, SequenceEntry};
-pub use write::{RenderSettings, SequenceSummary, write_sequence};
+pub use write::{RenderSettings, SequenceSummary, frame_name, write_image_lists, write_sequence};

@@ -47,8 +47,25 @@ pub struct SequenceSummary {
     pub seconds: f64,
 }
 
-fn frame_name(timestamp_s: f64) -> String {
+/// The file name of the frame taken at `timestamp_s` in `rgb/`, `depth/` and `mask/`.
+pub fn frame_name(timestamp_s: f64) -> String {
     format!("{timestamp_s:.6}.png")
+}
+
+/// Writes `rgb.txt` and `depth.txt` listing the frames at `timestamps_s` (named by
+/// [`frame_name`]), atomically. Written last, they make a sequence directory complete.
+///
+/// # Errors
+/// I/O errors naming the file.
+pub fn write_image_lists(dir: &Path, timestamps_s: &[f64]) -> Result<(), DatasetError> {
+    for (list, sub) in [("rgb.txt", "rgb"), ("depth.txt", "depth")] {
+        let mut text = format!("# {sub} images: timestamp path\n");
+        for &t in timestamps_s {
+            text.push_str(&format!("{t:.6} {sub}/{}\n", frame_name(t)));
+        }
+        write_bytes_atomically(dir.join(list), text.as_bytes())?;
+    }
+    Ok(())
 }
 
 /// Renders `poses` (true `world_from_camera`) through `world` into `dir` in the TUM RGB-D layout
@@ -119,17 +136,8 @@ pub fn write_sequence(
         .collect::<Result<_, DatasetError>>()?;
     let boxes: Vec<BoxRecord> = boxes.concat();
     write_bytes_atomically(dir.join("boxes.txt"), format_boxes(&boxes).as_bytes())?;
-    for (list, sub) in [("rgb.txt", "rgb"), ("depth.txt", "depth")] {
-        let mut text = format!("# {sub} images: timestamp path\n");
-        for pose in poses {
-            text.push_str(&format!(
-                "{:.6} {sub}/{}\n",
-                pose.timestamp_s,
-                frame_name(pose.timestamp_s)
-            ));
-        }
-        write_bytes_atomically(dir.join(list), text.as_bytes())?;
-    }
+    let timestamps: Vec<f64> = poses.iter().map(|p| p.timestamp_s).collect();
+    write_image_lists(dir, &timestamps)?;
     Ok(SequenceSummary {
         frames: poses.len(),
         boxes: boxes.len(),
