@@ -11,6 +11,7 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use nalgebra::{Isometry3, Vector3};
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 use scarp_datasets::render::Renderer;
 use scarp_datasets::world::{Rock, RockRole, World};
@@ -49,14 +50,87 @@ fn hillshade(world: &World, x: f64, y: f64, step_m: f64) -> f64 {
     normal.dot(&sun).clamp(0.0, 1.0)
 }
 
-/// The top-down map as RGB8 pixels, `MAP_PX` square.
-pub fn render_map(
+/// The terrain hillshade and the true rocks of `world` over `extent` (x0, y0, x1, y1).
+fn draw_terrain<DB: DrawingBackend>(
+    chart: &mut ChartContext<'_, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
     world: &World,
+    (x0, y0, x1, y1): (f64, f64, f64, f64),
+) -> anyhow::Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    let cells = 150usize;
+    let (dx, dy) = ((x1 - x0) / cells as f64, (y1 - y0) / cells as f64);
+    let (lo, hi) = world
+        .heightfield
+        .heights_m
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &h| {
+            (lo.min(f64::from(h)), hi.max(f64::from(h)))
+        });
+    let span = (hi - lo).max(1e-6);
+    let mut shading = Vec::with_capacity(cells * cells);
+    for j in 0..cells {
+        for i in 0..cells {
+            let (x, y) = (x0 + (i as f64 + 0.5) * dx, y0 + (j as f64 + 0.5) * dy);
+            let shade = hillshade(world, x, y, dx);
+            let tint = (world.terrain_height_m(x, y) - lo) / span;
+            let v = |base: f64| (base * (0.45 + 0.55 * shade)).clamp(0.0, 255.0) as u8;
+            let color = RGBColor(v(200.0 + 40.0 * tint), v(190.0 + 20.0 * tint), v(170.0));
+            shading.push(Rectangle::new(
+                [(x - 0.5 * dx, y - 0.5 * dy), (x + 0.5 * dx, y + 0.5 * dy)],
+                color.filled(),
+            ));
+        }
+    }
+    chart.draw_series(shading).map_err(draw_err)?;
+    for rock in &world.rocks {
+        let color = match rock.role {
+            RockRole::Target => RGBColor(200, 0, 0),
+            RockRole::Distractor => RGBColor(90, 90, 90),
+        };
+        chart
+            .draw_series(std::iter::once(Circle::new(
+                (rock.centroid.x, rock.centroid.y),
+                4,
+                color.filled(),
+            )))
+            .map_err(draw_err)?;
+    }
+    Ok(())
+}
+
+/// The top-down map as RGB8 pixels, `MAP_PX` square: with a world, its terrain and rocks under
+/// the true flight path; without one (a recorded flight), the estimated path on white, framed
+/// around the flight.
+pub fn render_map(
+    world: Option<&World>,
     log: &[FlightLogEntry],
     targets: &Catalog,
     safety_events: &[SafetyEvent],
 ) -> anyhow::Result<Vec<u8>> {
-    let (x0, y0, x1, y1) = world.heightfield.extent();
+    let path_of = |e: &FlightLogEntry| {
+        e.world_from_camera_truth
+            .unwrap_or(e.world_from_camera_estimate)
+            .translation
+            .vector
+    };
+    let (x0, y0, x1, y1) = match world {
+        Some(world) => world.heightfield.extent(),
+        None => {
+            let (mut x0, mut y0) = (f64::INFINITY, f64::INFINITY);
+            let (mut x1, mut y1) = (f64::NEG_INFINITY, f64::NEG_INFINITY);
+            for p in log.iter().map(path_of) {
+                (x0, y0, x1, y1) = (x0.min(p.x), y0.min(p.y), x1.max(p.x), y1.max(p.y));
+            }
+            if x0 > x1 {
+                (-10.0, -10.0, 10.0, 10.0)
+            } else {
+                let pad = 0.05 * (x1 - x0).max(y1 - y0).max(1.0);
+                (x0 - pad, y0 - pad, x1 + pad, y1 + pad)
+            }
+        }
+    };
     let mut buffer = vec![255u8; (MAP_PX * MAP_PX * 3) as usize];
     {
         let root = BitMapBackend::with_buffer(&mut buffer, (MAP_PX, MAP_PX)).into_drawing_area();
@@ -65,49 +139,11 @@ pub fn render_map(
             .margin(10)
             .build_cartesian_2d(x0..x1, y0..y1)
             .map_err(draw_err)?;
-        let cells = 150usize;
-        let (dx, dy) = ((x1 - x0) / cells as f64, (y1 - y0) / cells as f64);
-        let (lo, hi) = world
-            .heightfield
-            .heights_m
-            .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &h| {
-                (lo.min(f64::from(h)), hi.max(f64::from(h)))
-            });
-        let span = (hi - lo).max(1e-6);
-        let mut shading = Vec::with_capacity(cells * cells);
-        for j in 0..cells {
-            for i in 0..cells {
-                let (x, y) = (x0 + (i as f64 + 0.5) * dx, y0 + (j as f64 + 0.5) * dy);
-                let shade = hillshade(world, x, y, dx);
-                let tint = (world.terrain_height_m(x, y) - lo) / span;
-                let v = |base: f64| (base * (0.45 + 0.55 * shade)).clamp(0.0, 255.0) as u8;
-                let color = RGBColor(v(200.0 + 40.0 * tint), v(190.0 + 20.0 * tint), v(170.0));
-                shading.push(Rectangle::new(
-                    [(x - 0.5 * dx, y - 0.5 * dy), (x + 0.5 * dx, y + 0.5 * dy)],
-                    color.filled(),
-                ));
-            }
-        }
-        chart.draw_series(shading).map_err(draw_err)?;
-        for rock in &world.rocks {
-            let color = match rock.role {
-                RockRole::Target => RGBColor(200, 0, 0),
-                RockRole::Distractor => RGBColor(90, 90, 90),
-            };
-            chart
-                .draw_series(std::iter::once(Circle::new(
-                    (rock.centroid.x, rock.centroid.y),
-                    4,
-                    color.filled(),
-                )))
-                .map_err(draw_err)?;
+        if let Some(world) = world {
+            draw_terrain(&mut chart, world, (x0, y0, x1, y1))?;
         }
         for pair in log.windows(2) {
-            let (a, b) = (
-                pair[0].world_from_camera_truth.translation.vector,
-                pair[1].world_from_camera_truth.translation.vector,
-            );
+            let (a, b) = (path_of(&pair[0]), path_of(&pair[1]));
             chart
                 .draw_series(std::iter::once(PathElement::new(
                     vec![(a.x, a.y), (b.x, b.y)],
@@ -272,7 +308,7 @@ fn opt(v: Option<f64>, digits: usize) -> String {
 /// Drawing or writing errors naming the file.
 pub fn write_report(
     dir: &Path,
-    world: &World,
+    world: Option<&World>,
     report: &MissionReport,
     log: &[FlightLogEntry],
     targets: &Catalog,

@@ -26,9 +26,10 @@ use scarp_slam::tsdf::Roi;
 use scarp_slam::tsdf::TsdfConfig;
 use scarp_slam::{PinholeCamera, PointCloud, RgbdFrame, TriangleMesh};
 
-use super::config::MissionConfig;
+use super::config::{CylinderEstimateConfig, MissionConfig};
 use super::coverage::CylinderCoverage;
 use super::evaluation::nearest_rock;
+use super::perception::{Perception, center_in_box};
 use super::report::{StageTimings, TargetReport};
 use crate::evaluation::mesh::{MeshEvalConfig, MeshEvaluation, Visibility, evaluate_mesh_at_taus};
 use crate::evaluation::trajectory::{
@@ -46,8 +47,8 @@ pub struct StoredFrame {
     pub world_from_camera_odometry: Isometry3<f64>,
     /// The state estimate at the frame.
     pub world_from_camera_estimate: Isometry3<f64>,
-    /// The true pose (ground truth, for evaluation only).
-    pub world_from_camera_truth: Isometry3<f64>,
+    /// The true pose (ground truth, for evaluation only; `None` for a real or recorded flight).
+    pub world_from_camera_truth: Option<Isometry3<f64>>,
     /// Covariance of the odometry motion since the previous keyframe (see
     /// [`scarp_slam::mapping::KeyframeSet::odometry_covariance`]).
     pub odometry_covariance: Option<nalgebra::Matrix6<f64>>,
@@ -69,6 +70,83 @@ pub struct MappingSession {
     /// The last mapped frame's odometry position minus its true position (simulation only:
     /// what a controller flying on the odometry would be off by).
     navigation_error_m: Option<Vector3<f64>>,
+}
+
+/// Frames tried to see the target in before its map starts where the localization put it
+/// (see [`cylinder_seen_in_frame`]).
+pub const RECENTER_ATTEMPTS: usize = 20;
+
+/// The mapping cylinder's radius around `center` (world, m): the configured quantile of the
+/// localization points' horizontal distances from it, clamped to the configured range.
+pub fn cylinder_radius_m(
+    points: &[Point3<f64>],
+    center: &Point3<f64>,
+    config: &CylinderEstimateConfig,
+) -> f64 {
+    let mut radii: Vec<f64> = points
+        .iter()
+        .map(|p| (p.x - center.x).hypot(p.y - center.y))
+        .collect();
+    radii.sort_by(f64::total_cmp);
+    radii
+        .get(((radii.len() as f64 - 1.0) * config.radius_quantile).round() as usize)
+        .copied()
+        .unwrap_or(config.min_radius_m)
+        .clamp(config.min_radius_m, config.max_radius_m)
+}
+
+/// The mapping cylinder (paper §III, mapping) on the axis through `center`, of `radius_m`,
+/// from `bottom_below_terrain_m` under `ground_m` (world z, m) to `top_over_center_radii`
+/// radii above the centre (at least two radii tall).
+///
+/// # Errors
+/// A non-finite or non-positive size.
+pub fn cylinder_around(
+    center: &Point3<f64>,
+    radius_m: f64,
+    ground_m: f64,
+    config: &CylinderEstimateConfig,
+) -> anyhow::Result<VerticalCylinder> {
+    let bottom = ground_m - config.bottom_below_terrain_m;
+    let top = (center.z + config.top_over_center_radii * radius_m).max(bottom + 2.0 * radius_m);
+    Ok(VerticalCylinder::new(
+        center.x, center.y, radius_m, bottom, top,
+    )?)
+}
+
+/// `old` moved to where the detector sees its target in `frame` (taken at
+/// `world_from_camera`): the box nearest the cylinder's middle (within a quarter of the image),
+/// whole in the image, gives the centre from the depth inside it ([`center_in_box`]). `None`
+/// when no such box is seen or it lies more than `max_move_m` away. Returns the moved
+/// cylinder and how far it moved, m.
+///
+/// Why: the map is anchored at the state estimate of its first frame, seconds after the
+/// localization; the GPS walk in between would offset the rock in its region of interest.
+///
+/// # Errors
+/// A frame the detector cannot run on.
+pub fn cylinder_seen_in_frame(
+    perception: &mut Perception,
+    frame: &RgbdFrame,
+    camera: &PinholeCamera,
+    world_from_camera: &Isometry3<f64>,
+    old: &VerticalCylinder,
+    max_move_m: f64,
+) -> anyhow::Result<Option<(VerticalCylinder, f64)>> {
+    let mid = old.axis_point(0.5 * (old.z_bottom_m + old.z_top_m));
+    let gate_px = 0.25 * f64::from(camera.width);
+    let seen = perception
+        .detect_near(frame, camera, world_from_camera, &mid, gate_px)?
+        .filter(|b| b.is_inside_image(camera.width, camera.height, 2.0))
+        .and_then(|b| center_in_box(camera, &frame.depth_m, world_from_camera, &b))
+        .map(|c| (c, (c.x - old.center_x_m).hypot(c.y - old.center_y_m)))
+        .filter(|&(_, moved_m)| moved_m <= max_move_m);
+    let Some((seen, moved_m)) = seen else {
+        return Ok(None);
+    };
+    let cylinder =
+        VerticalCylinder::new(seen.x, seen.y, old.radius_m, old.z_bottom_m, old.z_top_m)?;
+    Ok(Some((cylinder, moved_m)))
 }
 
 /// The region of interest: the cylinder grown by `margin_m` sideways and by `vertical_margin_m`
@@ -213,7 +291,8 @@ impl MappingSession {
     }
 
     /// Maps one frame when its view meets the region of interest: tracks it against the model,
-    /// fuses it, updates the coverage and keeps it if it is a keyframe.
+    /// fuses it, updates the coverage and keeps it if it is a keyframe. The true pose, where
+    /// known (simulation), is kept for the evaluation only.
     ///
     /// # Errors
     /// A frame that does not match the camera or a non-finite estimate.
@@ -221,17 +300,16 @@ impl MappingSession {
         &mut self,
         mut frame: RgbdFrame,
         world_from_camera_estimate: &Isometry3<f64>,
-        world_from_camera_truth: &Isometry3<f64>,
+        world_from_camera_truth: Option<&Isometry3<f64>>,
     ) -> anyhow::Result<()> {
         if !self.would_map(world_from_camera_estimate) {
             return Ok(());
         }
         frame.instance_mask = None;
         let tracked = self.tracker.process(&frame, world_from_camera_estimate)?;
-        self.navigation_error_m = (!tracked.fell_back).then(|| {
-            tracked.world_from_camera.translation.vector
-                - world_from_camera_truth.translation.vector
-        });
+        self.navigation_error_m = world_from_camera_truth
+            .filter(|_| !tracked.fell_back)
+            .map(|truth| tracked.world_from_camera.translation.vector - truth.translation.vector);
         self.coverage
             .observe(&self.camera, &tracked.world_from_camera);
         if tracked.keyframe.is_some() {
@@ -239,7 +317,7 @@ impl MappingSession {
                 frame,
                 world_from_camera_odometry: tracked.world_from_camera,
                 world_from_camera_estimate: *world_from_camera_estimate,
-                world_from_camera_truth: *world_from_camera_truth,
+                world_from_camera_truth: world_from_camera_truth.copied(),
                 odometry_covariance: tracked.keyframe_covariance,
             });
         } else if !tracked.fell_back
@@ -258,25 +336,33 @@ impl MappingSession {
     }
 }
 
-/// Writes the keyframes' trajectories (TUM, `world_from_camera`): `keyframes_odometry.txt`,
-/// `keyframes_ba.txt` (both in the map frame) and `keyframes_groundtruth.txt`, so that the
-/// mapping flight can be inspected with the TUM tools.
+/// Writes the keyframes' trajectories (TUM, `world_from_camera`, stamped with `timestamps_s`):
+/// `keyframes_odometry.txt`, `keyframes_ba.txt` (both in the map frame) and, with ground truth,
+/// `keyframes_groundtruth.txt`, so that the mapping flight can be inspected with the TUM tools.
 fn write_keyframe_trajectories(
     dir: &Path,
-    truth: &[StampedPose],
+    timestamps_s: &[f64],
+    truth: Option<&[StampedPose]>,
     odometry: &[Isometry3<f64>],
     refined: &[Isometry3<f64>],
 ) -> anyhow::Result<()> {
     let stamped = |poses: &[Isometry3<f64>]| -> Vec<StampedPose> {
-        truth
+        timestamps_s
             .iter()
             .zip(poses)
-            .map(|(t, p)| StampedPose {
-                timestamp_s: t.timestamp_s,
+            .map(|(&timestamp_s, p)| StampedPose {
+                timestamp_s,
                 world_from_camera: *p,
             })
             .collect()
     };
+    let truth = truth.map(|t| {
+        (
+            "keyframes_groundtruth.txt",
+            t.to_vec(),
+            "keyframe true world_from_camera (world frame)",
+        )
+    });
     for (name, poses, comment) in [
         (
             "keyframes_odometry.txt",
@@ -288,12 +374,10 @@ fn write_keyframe_trajectories(
             stamped(refined),
             "keyframe world_from_camera after bundle adjustment (map frame)",
         ),
-        (
-            "keyframes_groundtruth.txt",
-            truth.to_vec(),
-            "keyframe true world_from_camera (world frame)",
-        ),
-    ] {
+    ]
+    .into_iter()
+    .chain(truth)
+    {
         let path = dir.join(name);
         write_tum_trajectory(&path, &poses, comment)
             .with_context(|| format!("writing {}", path.display()))?;
@@ -338,7 +422,8 @@ pub fn map_to_world(truth: &[StampedPose], poses: &[Isometry3<f64>]) -> Option<I
 
 /// Finishes a target: bundle adjustment of the stored frames, re-integration, mesh, fragility,
 /// files in `dir` (`mesh.ply`, `mesh.glb`, `points.ply`, `fragility.json`, view PNGs) and, with
-/// ground truth, the scores in `report`. Returns whether the target counts as mapped (coverage
+/// ground truth (`world`, and every keyframe's true pose), the scores in `report`. Without a
+/// world, the view PNGs are lit by the built-in default world's sun. Returns whether the target counts as mapped (coverage
 /// reached and fragility analysed).
 ///
 /// # Errors
@@ -346,7 +431,7 @@ pub fn map_to_world(truth: &[StampedPose], poses: &[Isometry3<f64>]) -> Option<I
 pub fn finish_target(
     session: MappingSession,
     points: &[Point3<f64>],
-    world: &World,
+    world: Option<&World>,
     config: &MissionConfig,
     dir: &Path,
     report: &mut TargetReport,
@@ -364,11 +449,15 @@ pub fn finish_target(
         return Ok(false);
     }
     // The frames move into the keyframe set; the truth stays beside it for the evaluation.
-    let truth: Vec<StampedPose> = stored
+    let timestamps_s: Vec<f64> = stored.iter().map(|f| f.frame.timestamp_s).collect();
+    let truth: Option<Vec<StampedPose>> = stored
         .iter()
-        .map(|f| StampedPose {
-            timestamp_s: f.frame.timestamp_s,
-            world_from_camera: f.world_from_camera_truth,
+        .map(|f| {
+            f.world_from_camera_truth
+                .map(|world_from_camera| StampedPose {
+                    timestamp_s: f.frame.timestamp_s,
+                    world_from_camera,
+                })
         })
         .collect();
     let mut keyframes = KeyframeSet {
@@ -432,7 +521,13 @@ pub fn finish_target(
         ));
     }
     write_mesh(dir.join("mesh.ply"), &mesh, PlyEncoding::BinaryLittleEndian)?;
-    write_keyframe_trajectories(dir, &truth, odometry_poses, &refined)?;
+    write_keyframe_trajectories(
+        dir,
+        &timestamps_s,
+        truth.as_deref(),
+        odometry_poses,
+        &refined,
+    )?;
     let mut extras = serde_json::json!({"target_id": report.id, "status": if mapped {"mapped"} else {"incomplete"}});
     if let Some(a) = report.alpha_min_deg {
         extras["alpha_min_deg"] = a.into();
@@ -459,22 +554,27 @@ pub fn finish_target(
         let view_mesh = fragility
             .as_ref()
             .map_or_else(|_| mesh.clone(), |a| a.closed_rock());
-        super::html::write_mesh_views(world, &view_mesh, dir)?;
+        match world {
+            Some(world) => super::html::write_mesh_views(world, &view_mesh, dir)?,
+            None => super::html::write_mesh_views(&World::builtin_default()?, &view_mesh, dir)?,
+        };
     }
     timings.fragility_export_s += clock.elapsed().as_secs_f64();
 
     let clock = Instant::now();
-    score_against_ground_truth(
-        world,
-        config,
-        &truth,
-        odometry_poses,
-        &refined,
-        &mesh,
-        mesh_before.as_ref(),
-        report,
-        &session.camera,
-    );
+    if let (Some(world), Some(truth)) = (world, truth) {
+        score_against_ground_truth(
+            world,
+            config,
+            &truth,
+            odometry_poses,
+            &refined,
+            &mesh,
+            mesh_before.as_ref(),
+            report,
+            &session.camera,
+        );
+    }
     timings.evaluation_s += clock.elapsed().as_secs_f64();
     Ok(mapped)
 }

@@ -26,6 +26,18 @@ impl Mode {
         }
     }
 
+    /// The mode named `name` (as [`Self::as_str`] writes it) working on `target`; `None` for an
+    /// unknown name or a missing target.
+    pub fn parse(name: &str, target: Option<u32>) -> Option<Self> {
+        match (name, target) {
+            ("search", _) => Some(Self::Search),
+            ("fine_localize", Some(id)) => Some(Self::FineLocalize(id)),
+            ("map", Some(id)) => Some(Self::Map(id)),
+            ("done", _) => Some(Self::Done),
+            _ => None,
+        }
+    }
+
     /// The target the mode works on, if any.
     pub fn target(self) -> Option<u32> {
         match self {
@@ -40,8 +52,8 @@ impl Mode {
 pub struct FlightLogEntry {
     /// Mission time, seconds.
     pub time_s: f64,
-    /// True camera pose.
-    pub world_from_camera_truth: Isometry3<f64>,
+    /// True camera pose (simulation only; `None` for a recorded flight).
+    pub world_from_camera_truth: Option<Isometry3<f64>>,
     /// Estimated camera pose (GPS/IMU).
     pub world_from_camera_estimate: Isometry3<f64>,
     /// Mode at that instant.

@@ -7,6 +7,7 @@
 //! - `estimate.txt`: the autopilot's `world_from_camera` estimate of every frame (TUM format,
 //!   ENU metres), after the rangefinder's height correction;
 //! - `camera.toml`: the camera model;
+//! - `origin.toml`: the geodetic position of the ENU frame's origin (WGS84);
 //! - `flight.txt`: per frame, the camera mount's pitch below the horizon (degrees), the flight
 //!   mode and its target.
 //!
@@ -34,8 +35,52 @@ use scarp_datasets::world::World;
 use scarp_export::atomic::write_bytes_atomically;
 use scarp_export::tum::{StampedPose, write_tum_trajectory};
 use scarp_slam::{PinholeCamera, RgbdFrame};
+use serde::{Deserialize, Serialize};
 
 use super::mode::Mode;
+
+/// The geodetic position (WGS84) of a flight's ENU origin: `origin.toml`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FlightOrigin {
+    /// Latitude, degrees north.
+    pub lat_deg: f64,
+    /// Longitude, degrees east.
+    pub lon_deg: f64,
+    /// Height above the WGS84 ellipsoid, metres.
+    pub alt_m: f64,
+}
+
+impl FlightOrigin {
+    /// The origin of `world`'s ENU frame.
+    pub fn of_world(world: &World) -> Self {
+        let o = world.config.origin;
+        Self {
+            lat_deg: o.lat_deg,
+            lon_deg: o.lon_deg,
+            alt_m: o.alt_m,
+        }
+    }
+
+    /// As the GeoJSON writer takes it.
+    pub fn geodetic(&self) -> scarp_export::geojson::Geodetic {
+        scarp_export::geojson::Geodetic {
+            lat_deg: self.lat_deg,
+            lon_deg: self.lon_deg,
+            alt_m: self.alt_m,
+        }
+    }
+
+    /// Reads `origin.toml`.
+    ///
+    /// # Errors
+    /// A missing or malformed file, named.
+    pub fn read(path: &Path) -> anyhow::Result<Self> {
+        let text =
+            std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+        toml::from_str(&text).with_context(|| format!("parsing {}", path.display()))
+    }
+}
 
 /// Depth PNG units per metre: 1000 reaches 65 m, beyond the sensor's 30 m.
 pub const RECORD_DEPTH_SCALE: f64 = 1000.0;
@@ -55,17 +100,22 @@ pub struct FlightRecorder {
 }
 
 impl FlightRecorder {
-    /// Starts a recording in `dir` (created) for `camera`.
+    /// Starts a recording in `dir` (created) for `camera`, in the ENU frame at `origin`.
     ///
     /// # Errors
-    /// When `dir` or its subfolders cannot be created, or `camera.toml` cannot be written.
-    pub fn new(dir: &Path, camera: &PinholeCamera) -> anyhow::Result<Self> {
+    /// When `dir` or its subfolders cannot be created, or `camera.toml` or `origin.toml`
+    /// cannot be written.
+    pub fn new(dir: &Path, camera: &PinholeCamera, origin: FlightOrigin) -> anyhow::Result<Self> {
         for sub in ["rgb", "depth", "mask", "groundtruth"] {
             let path = dir.join(sub);
             std::fs::create_dir_all(&path)
                 .with_context(|| format!("creating {}", path.display()))?;
         }
         CameraFile::new(camera, RECORD_DEPTH_SCALE).write(&dir.join("camera.toml"))?;
+        write_bytes_atomically(
+            dir.join("origin.toml"),
+            toml::to_string(&origin)?.as_bytes(),
+        )?;
         let (queue, frames) = sync_channel(QUEUE_FRAMES);
         let images_dir = dir.to_path_buf();
         let writer = std::thread::Builder::new()
@@ -192,7 +242,8 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let camera = PinholeCamera::from_hfov(32, 24, 80.0).unwrap();
         let world = World::from_name_or_path("default").unwrap();
-        let mut recorder = FlightRecorder::new(dir.path(), &camera).unwrap();
+        let origin = FlightOrigin::of_world(&world);
+        let mut recorder = FlightRecorder::new(dir.path(), &camera, origin).unwrap();
         let mut mask = MaskImage::filled(32, 24, 0);
         *mask.get_mut(3, 4).unwrap() = 1;
         for k in 0..3 {
@@ -226,6 +277,10 @@ mod tests {
         assert!(dir.path().join("groundtruth/groundtruth.txt").exists());
         let flight = std::fs::read_to_string(dir.path().join("flight.txt")).unwrap();
         assert!(flight.contains("0.500000 55.0000 search -"), "{flight}");
+        assert_eq!(
+            FlightOrigin::read(&dir.path().join("origin.toml")).unwrap(),
+            origin
+        );
         let boxes = std::fs::read_to_string(dir.path().join("boxes.txt")).unwrap();
         assert_eq!(boxes.lines().filter(|l| !l.starts_with('#')).count(), 3);
     }

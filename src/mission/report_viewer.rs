@@ -226,7 +226,7 @@ fn percentile(values: &[f32], p: f64) -> Option<f64> {
     Some(v[i])
 }
 
-fn view_data(world: &World, target: &TargetReport, target_dir: &Path) -> Option<ViewData> {
+fn view_data(world: Option<&World>, target: &TargetReport, target_dir: &Path) -> Option<ViewData> {
     let mesh = read_mesh(target_dir.join("mesh.ply")).ok()?;
     if mesh.faces.is_empty() {
         return None;
@@ -235,7 +235,7 @@ fn view_data(world: &World, target: &TargetReport, target_dir: &Path) -> Option<
         .ok()
         .and_then(|bytes| serde_json::from_slice(&bytes).ok());
     let shown = decimate(&mesh, MAX_VIEW_TRIANGLES);
-    let gt = ground_truth_in_map_frame(world, target, target_dir, &mesh);
+    let gt = world.and_then(|world| ground_truth_in_map_frame(world, target, target_dir, &mesh));
     let error: Option<Vec<f32>> = gt.as_ref().and_then(|gt| {
         let index = MeshDistance::new(gt, &[], 16, "ground truth").ok()?;
         Some(
@@ -387,7 +387,7 @@ fn opt(v: Option<f64>, digits: usize) -> String {
 /// The interactive sections of `report.html` for the mission in `dir` (its `targets/<id>/`
 /// folders must be written): the α table, then per target with a mesh its 3D view and polar
 /// plot, then the scripts. Targets whose files cannot be read are left out of the views.
-pub fn interactive_sections(dir: &Path, world: &World, report: &MissionReport) -> String {
+pub fn interactive_sections(dir: &Path, world: Option<&World>, report: &MissionReport) -> String {
     let start = std::time::Instant::now();
     let mut html = String::new();
     // The table of every target's α with its interval.

@@ -30,14 +30,16 @@ use super::mode::{FlightLogEntry, Mode};
 use super::monitor::{SafetyMonitor, Senses, nearest_depth_m};
 use super::motion::MotionSystem;
 use super::mount::CameraMount;
-use super::perception::{Perception, center_in_box};
-use super::record::FlightRecorder;
+use super::perception::Perception;
+use super::record::{FlightOrigin, FlightRecorder};
 use super::report::{MissionReport, ModeChange, StageTimings};
 use super::safety::SafetyLog;
 
 /// Frames tried (at the map camera rate: 1 s) to see the target before its map starts anyway
 /// (`Mission::recenter_map_on_first_frame`).
-const RECENTER_ATTEMPTS: usize = 20;
+use super::mapping::{
+    RECENTER_ATTEMPTS, cylinder_around, cylinder_radius_m, cylinder_seen_in_frame,
+};
 
 /// Where the lawn-mower was left, to resume it.
 #[derive(Debug, Clone)]
@@ -197,7 +199,7 @@ impl<'a> Mission<'a> {
         let recorder = inputs
             .record
             .as_deref()
-            .map(|dir| FlightRecorder::new(dir, &camera))
+            .map(|dir| FlightRecorder::new(dir, &camera, FlightOrigin::of_world(world)))
             .transpose()?;
         Ok(Self {
             recorder,
@@ -369,7 +371,7 @@ impl<'a> Mission<'a> {
         estimate.translation.vector.z += self.monitor.height_correction_m();
         self.log.push(FlightLogEntry {
             time_s: t,
-            world_from_camera_truth: truth,
+            world_from_camera_truth: Some(truth),
             world_from_camera_estimate: estimate,
             mode: self.mode,
         });
@@ -442,7 +444,7 @@ impl<'a> Mission<'a> {
                 let complete = match self.mapping.as_mut() {
                     Some(session) => {
                         if map_this_frame {
-                            session.process(frame, &estimate, &truth)?;
+                            session.process(frame, &estimate, Some(&truth))?;
                         }
                         session.coverage().is_complete()
                     }
@@ -697,35 +699,22 @@ impl<'a> Mission<'a> {
         Ok(())
     }
 
-    /// The mapping cylinder from the converged point set (paper §III, mapping).
+    /// The mapping cylinder from the converged point set (paper §III, mapping), standing on
+    /// the ground in the frame the vehicle flies in (the GPS error shifts everything, the DEM
+    /// does not know it): measured by the depth camera around the target, else the DEM.
     fn target_cylinder(
         &self,
         points: &[Point3<f64>],
         center: &Point3<f64>,
     ) -> anyhow::Result<VerticalCylinder> {
         let c = &self.inputs.config.cylinder;
-        let mut radii: Vec<f64> = points
-            .iter()
-            .map(|p| (p.x - center.x).hypot(p.y - center.y))
-            .collect();
-        radii.sort_by(f64::total_cmp);
-        let quantile = radii
-            .get(((radii.len() as f64 - 1.0) * c.radius_quantile).round() as usize)
-            .copied()
-            .unwrap_or(c.min_radius_m);
-        let radius = quantile.clamp(c.min_radius_m, c.max_radius_m);
-        // The ground in the frame the vehicle flies in (the GPS error shifts everything, the
-        // DEM does not know it): measured by the depth camera around the target, else the DEM.
+        let radius = cylinder_radius_m(points, center, c);
         let ground = self
             .last_depth
             .as_ref()
             .and_then(|(depth, pose)| ground_height_near(&self.camera, depth, pose, center, radius))
             .unwrap_or_else(|| self.inputs.world.terrain_height_m(center.x, center.y));
-        let bottom = ground - c.bottom_below_terrain_m;
-        let top = (center.z + c.top_over_center_radii * radius).max(bottom + 2.0 * radius);
-        Ok(VerticalCylinder::new(
-            center.x, center.y, radius, bottom, top,
-        )?)
+        cylinder_around(center, radius, ground, c)
     }
 
     /// Just before the first frame is mapped (which anchors the map frame at this frame's
@@ -757,22 +746,17 @@ impl<'a> Mission<'a> {
         }
         self.recenter_attempts += 1;
         let old = *session.cylinder();
-        let mid = old.axis_point(0.5 * (old.z_bottom_m + old.z_top_m));
-        // A box centre further than a quarter of the image from the expected centre is
-        // another object.
-        let gate_px = 0.25 * f64::from(self.camera.width);
-        let seen = self
-            .perception
-            .detect_near(frame, &self.camera, estimate, &mid, gate_px)?
-            .filter(|b| b.is_inside_image(self.camera.width, self.camera.height, 2.0))
-            .and_then(|b| center_in_box(&self.camera, &frame.depth_m, estimate, &b))
-            .map(|c| (c, (c.x - old.center_x_m).hypot(c.y - old.center_y_m)))
-            .filter(|&(_, moved_m)| moved_m <= config.cylinder.max_recenter_m);
-        let Some((seen, moved_m)) = seen else {
+        let seen = cylinder_seen_in_frame(
+            &mut self.perception,
+            frame,
+            &self.camera,
+            estimate,
+            &old,
+            config.cylinder.max_recenter_m,
+        )?;
+        let Some((cylinder, moved_m)) = seen else {
             return Ok(self.recenter_attempts >= RECENTER_ATTEMPTS);
         };
-        let cylinder =
-            VerticalCylinder::new(seen.x, seen.y, old.radius_m, old.z_bottom_m, old.z_top_m)?;
         tracing::info!(
             "target {id}: map cylinder moved {moved_m:.2} m to where the first mapped frame sees it"
         );
@@ -883,7 +867,7 @@ impl<'a> Mission<'a> {
         let outcome = finish_target(
             session,
             &points,
-            self.inputs.world,
+            Some(self.inputs.world),
             &self.inputs.config,
             &dir,
             &mut target.report,
@@ -1001,7 +985,7 @@ impl<'a> Mission<'a> {
         )?;
         super::html::write_report(
             &out,
-            self.inputs.world,
+            Some(self.inputs.world),
             &self.report,
             &self.log,
             &self.targets,
@@ -1010,18 +994,20 @@ impl<'a> Mission<'a> {
     }
 
     fn write_trajectories(&self, out: &Path) -> anyhow::Result<()> {
-        let poses = |f: fn(&FlightLogEntry) -> Isometry3<f64>| -> Vec<StampedPose> {
+        let poses = |f: fn(&FlightLogEntry) -> Option<Isometry3<f64>>| -> Vec<StampedPose> {
             self.log
                 .iter()
-                .map(|e| StampedPose {
-                    timestamp_s: e.time_s,
-                    world_from_camera: f(e),
+                .filter_map(|e| {
+                    f(e).map(|world_from_camera| StampedPose {
+                        timestamp_s: e.time_s,
+                        world_from_camera,
+                    })
                 })
                 .collect()
         };
         write_tum_trajectory(
             &out.join("trajectory.txt"),
-            &poses(|e| e.world_from_camera_estimate),
+            &poses(|e| Some(e.world_from_camera_estimate)),
             "estimated world_from_camera (GPS/IMU) at every camera frame, ENU metres",
         )?;
         write_tum_trajectory(
