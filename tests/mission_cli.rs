@@ -11,6 +11,7 @@ use std::process::Command;
 fn small_world_mission_finds_maps_and_measures_its_target() {
     let dir = tempfile::tempdir().unwrap();
     let out_dir = dir.path().join("mission");
+    let flight = dir.path().join("flight");
     let out = scarp(&[
         "simulate",
         "--world",
@@ -21,6 +22,8 @@ fn small_world_mission_finds_maps_and_measures_its_target() {
         "3",
         "--out",
         out_dir.to_str().unwrap(),
+        "--record",
+        flight.to_str().unwrap(),
     ]);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "{stderr}");
@@ -133,6 +136,69 @@ fn small_world_mission_finds_maps_and_measures_its_target() {
         !html.contains("src=\"http"),
         "report.html must not load anything online"
     );
+
+    the_recorded_flight_processes_into_the_same_catalog(&flight, dir.path(), &json, t);
+}
+
+/// `scarp process` on the flight the mission recorded, without its ground truth: the same
+/// target mapped, α_min within 2° (the depth PNGs are quantized to 1 mm), every output
+/// written and no ground-truth column filled.
+fn the_recorded_flight_processes_into_the_same_catalog(
+    flight: &Path,
+    dir: &Path,
+    live: &serde_json::Value,
+    live_target: &serde_json::Value,
+) {
+    assert!(flight.join("groundtruth/groundtruth.txt").is_file());
+    assert!(!flight.join("groundtruth.txt").exists());
+    let processed = dir.join("processed");
+    let out = scarp(&[
+        "process",
+        flight.to_str().unwrap(),
+        "--config",
+        &test_data("small_mission.toml"),
+        "--seed",
+        "3",
+        "--out",
+        processed.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let json: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(processed.join("mission.json")).unwrap()).unwrap();
+    assert_eq!(json["targets_mapped"], live["targets_mapped"], "{json:#}");
+    let id = &live_target["id"];
+    let t = json["targets"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|t| &t["id"] == id)
+        .unwrap_or_else(|| panic!("target {id} not processed: {json:#}"));
+    assert_eq!(t["status"], live_target["status"], "{t:#}");
+    if let (Some(a), Some(b)) = (
+        t["alpha_min_deg"].as_f64(),
+        live_target["alpha_min_deg"].as_f64(),
+    ) {
+        assert!((a - b).abs() <= 2.0, "α_min {a} offline, {b} live");
+    }
+    assert!(
+        t["fscore_2cm"].is_null() && t["gt_rock_id"].is_null(),
+        "{t:#}"
+    );
+    let target_dir = processed.join("targets").join(id.to_string());
+    for file in ["mesh.ply", "mesh.glb", "fragility.json", "keyframes_ba.txt"] {
+        assert!(
+            target_dir.join(file).is_file(),
+            "missing targets/{id}/{file}"
+        );
+    }
+    assert!(!target_dir.join("keyframes_groundtruth.txt").exists());
+    for file in ["targets.geojson", "targets.csv", "report.html", "map.png"] {
+        assert!(processed.join(file).is_file(), "missing {file}");
+    }
 }
 
 /// Runs `scarp simulate` on the small world in `dir` with the mission file `config` (TOML

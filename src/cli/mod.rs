@@ -10,6 +10,7 @@ pub mod localize;
 pub mod map;
 pub mod odometry;
 pub mod plan;
+pub mod process;
 pub mod render;
 pub mod simulate;
 pub mod track;
@@ -41,6 +42,9 @@ pub enum Command {
     Fragility(fragility::FragilityArgs),
     /// Run the simulated mission on a world (the main job).
     Simulate(simulate::SimulateArgs),
+    /// Process a recorded flight offline (`scarp simulate --record`, or a real one): the same
+    /// catalog, meshes and fragility as a live mission.
+    Process(process::ProcessArgs),
     /// Run the mission over many worlds and seeds and tabulate every figure (`campaign.json`,
     /// `campaign.md`); resumable, shardable (`--shard I/N`), `merge` joins shards.
     Campaign(campaign::CampaignArgs),
@@ -77,6 +81,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Ba(args) => ba::run(args),
         Command::Fragility(args) => fragility::run(args),
         Command::Simulate(args) => simulate::run(args),
+        Command::Process(args) => process::run(args),
         Command::Campaign(args) => campaign::run(args),
         Command::Eval(args) => eval::run(args),
         Command::Odometry(args) => odometry::run(args),

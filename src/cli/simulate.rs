@@ -43,7 +43,11 @@ pub struct SimulateArgs {
     pub record: Option<PathBuf>,
 }
 
-fn load_config(path: Option<&PathBuf>) -> anyhow::Result<MissionConfig> {
+/// The mission configuration in `path`, or the defaults.
+///
+/// # Errors
+/// An unreadable file, or an unknown key or bad value (named).
+pub(crate) fn load_config(path: Option<&PathBuf>) -> anyhow::Result<MissionConfig> {
     let Some(path) = path else {
         return Ok(MissionConfig::default());
     };

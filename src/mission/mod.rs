@@ -24,6 +24,7 @@ pub mod mode;
 pub mod monitor;
 pub mod motion;
 pub mod mount;
+pub mod offline;
 pub mod perception;
 pub mod record;
 pub mod report;
