@@ -26,6 +26,7 @@ use scarp_slam::tsdf::Roi;
 use scarp_slam::tsdf::TsdfConfig;
 use scarp_slam::{PinholeCamera, PointCloud, RgbdFrame, TriangleMesh};
 
+use super::catalog::TargetStatus;
 use super::config::{CylinderEstimateConfig, MissionConfig};
 use super::coverage::CylinderCoverage;
 use super::evaluation::nearest_rock;
@@ -418,6 +419,19 @@ pub fn map_to_world(truth: &[StampedPose], poses: &[Isometry3<f64>]) -> Option<I
         s.translation.into(),
         nalgebra::UnitQuaternion::from_rotation_matrix(&s.rotation),
     ))
+}
+
+/// The mission status of a target from [`finish_target`]'s outcome: mapped, or incomplete
+/// (a failure is kept in `report.error`).
+pub fn mapped_status(outcome: anyhow::Result<bool>, report: &mut TargetReport) -> TargetStatus {
+    match outcome {
+        Ok(true) => TargetStatus::Mapped,
+        Ok(false) => TargetStatus::Incomplete,
+        Err(e) => {
+            report.error = Some(format!("{e:#}"));
+            TargetStatus::Incomplete
+        }
+    }
 }
 
 /// Finishes a target: bundle adjustment of the stored frames, re-integration, mesh, fragility,

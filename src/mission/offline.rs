@@ -40,7 +40,7 @@ use super::catalog::{Catalog, MissionTarget, TargetStatus};
 use super::config::MissionConfig;
 use super::mapping::{
     MappingSession, RECENTER_ATTEMPTS, cylinder_around, cylinder_radius_m, cylinder_seen_in_frame,
-    finish_target,
+    finish_target, mapped_status,
 };
 use super::mode::{FlightLogEntry, Mode};
 use super::perception::{BoxSource, Perception, TargetState};
@@ -411,14 +411,7 @@ pub fn process_flight(inputs: &ProcessInputs<'_>) -> anyhow::Result<MissionRepor
             &mut target.report,
             &mut timings,
         );
-        let status = match outcome {
-            Ok(true) => TargetStatus::Mapped,
-            Ok(false) => TargetStatus::Incomplete,
-            Err(e) => {
-                target.report.error = Some(format!("{e:#}"));
-                TargetStatus::Incomplete
-            }
-        };
+        let status = mapped_status(outcome, &mut target.report);
         tracing::info!(
             "target {id} {} (coverage {:.2}, {} keyframes, α_min {:?}°)",
             status.as_str(),

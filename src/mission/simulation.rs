@@ -25,7 +25,7 @@ use scarp_slam::{PinholeCamera, RgbdFrame};
 use super::catalog::{Catalog, MissionTarget, TargetStatus, is_already_handled};
 use super::config::MissionConfig;
 use super::evaluation::EstimatorErrorByTarget;
-use super::mapping::{MappingSession, finish_target};
+use super::mapping::{MappingSession, finish_target, mapped_status};
 use super::mode::{FlightLogEntry, Mode};
 use super::monitor::{SafetyMonitor, Senses, nearest_depth_m};
 use super::motion::MotionSystem;
@@ -873,14 +873,7 @@ impl<'a> Mission<'a> {
             &mut target.report,
             timings,
         );
-        let status = match outcome {
-            Ok(true) => TargetStatus::Mapped,
-            Ok(false) => TargetStatus::Incomplete,
-            Err(e) => {
-                target.report.error = Some(format!("{e:#}"));
-                TargetStatus::Incomplete
-            }
-        };
+        let status = mapped_status(outcome, &mut target.report);
         tracing::info!(
             "t = {:.1} s: target {id} {} (coverage {:.2}, {} keyframes, α_min {:?}°)",
             self.motion.time_s(),
