@@ -260,7 +260,7 @@ mod tests {
             .collect();
         let pca = PointSetPca::from_points(&pts).unwrap();
         assert!(pca.axes[0].z >= 0.0);
-        let det = nalgebra::Matrix3::from_columns(&pca.axes).determinant();
+        let det = Matrix3::from_columns(&pca.axes).determinant();
         assert!((det - 1.0).abs() < 1e-9);
         assert!(pca.eigenvalues_m2[0] <= pca.eigenvalues_m2[1]);
         assert!(pca.eigenvalues_m2[1] <= pca.eigenvalues_m2[2]);

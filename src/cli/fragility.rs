@@ -228,7 +228,7 @@ mod tests {
     fn runs_on_an_obj_block_with_figure() {
         let dir = tempfile::tempdir().unwrap();
         let mesh = dir.path().join("block.obj");
-        let block = scarp_slam::TriangleMesh::cuboid(
+        let block = TriangleMesh::cuboid(
             nalgebra::Point3::origin(),
             nalgebra::Point3::new(1.0, 1.0, 2.0),
         );

@@ -598,7 +598,7 @@ proptest! {
         let reference = analyze(&to_mesh(&solid), ContactSpec::Auto, &quick()).unwrap();
         // Yaw about the vertical, then tilt the whole scene and tell the analysis where up is.
         let tilt_rotation = UnitQuaternion::from_axis_angle(
-            &nalgebra::Unit::new_normalize(Vector3::new(tilt_axis.cos(), tilt_axis.sin(), 0.0)),
+            &Unit::new_normalize(Vector3::new(tilt_axis.cos(), tilt_axis.sin(), 0.0)),
             tilt,
         );
         let motion = Isometry3::from_parts(

@@ -64,7 +64,7 @@ impl EstimatorErrorByTarget {
 pub fn estimate_frame_error_m(
     center: &Point3<f64>,
     true_centroid: &Point3<f64>,
-    estimator_error_m: &nalgebra::Vector3<f64>,
+    estimator_error_m: &Vector3<f64>,
 ) -> f64 {
     (true_centroid + estimator_error_m - center).norm()
 }
@@ -80,10 +80,10 @@ pub fn ground_truth_summary(world: &World, targets: &mut Catalog, report: &mut M
                 m.report.gt_rock_id = Some(rock.id);
                 m.report.gt_role = Some(rock.role.as_str().into());
                 m.report.localization_error_m = Some(distance);
-                m.report.localization_error_estimate_frame_m =
-                    m.report.estimator_error_at_localization_m.map(|e| {
-                        estimate_frame_error_m(&center, &rock.centroid, &nalgebra::Vector3::from(e))
-                    });
+                m.report.localization_error_estimate_frame_m = m
+                    .report
+                    .estimator_error_at_localization_m
+                    .map(|e| estimate_frame_error_m(&center, &rock.centroid, &Vector3::from(e)));
             }
             None => {
                 m.report.gt_rock_id = None;
@@ -129,7 +129,7 @@ mod tests {
             .find(|r| r.role == RockRole::Distractor)
             .unwrap();
         let mut targets = Catalog::new();
-        let off = nalgebra::Vector3::new(0.3, -0.4, 0.0);
+        let off = Vector3::new(0.3, -0.4, 0.0);
         let mut biased = target(rocks[0].centroid + off, TargetStatus::Mapped);
         // The estimator was off by 0.2 m east and 0.1 m up while localizing it: in its frame
         // the centre is 0.1 m east, 0.4 m south and 0.1 m low of where the rock appeared.

@@ -323,15 +323,15 @@ impl TsdfVolume {
             .iter()
             .map(|b| b.weight.iter().filter(|&&w| w > 0.0).count())
             .sum();
-        let entry = std::mem::size_of::<BlockCoord>() + std::mem::size_of::<u32>() + 8;
+        let entry = size_of::<BlockCoord>() + size_of::<u32>() + 8;
         VolumeStats {
             blocks: self.blocks.len(),
             voxels: self.blocks.len() * BLOCK_VOXELS,
             observed_voxels,
             memory_bytes: self.blocks.len() * Block::BYTES
                 + self.index.capacity() * entry
-                + self.coords.capacity() * std::mem::size_of::<BlockCoord>()
-                + self.blocks.capacity() * std::mem::size_of::<Block>(),
+                + self.coords.capacity() * size_of::<BlockCoord>()
+                + self.blocks.capacity() * size_of::<Block>(),
         }
     }
 
