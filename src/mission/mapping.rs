@@ -576,11 +576,11 @@ pub fn finish_target(
     timings.fragility_export_s += clock.elapsed().as_secs_f64();
 
     let clock = Instant::now();
-    if let (Some(world), Some(truth)) = (world, truth) {
+    if let Some(world) = world {
         score_against_ground_truth(
             world,
             config,
-            &truth,
+            truth.as_deref(),
             odometry_poses,
             &refined,
             &mesh,
@@ -635,12 +635,13 @@ fn score_mesh(
     scores.try_into().ok()
 }
 
-/// Fills the ground-truth fields of `report` (nothing when no true rock is near).
+/// Fills the ground-truth fields of `report` (nothing when no true rock is near): the true α_min
+/// and, with the true poses `truth`, the ATEs and the mesh scores.
 #[allow(clippy::too_many_arguments)]
 fn score_against_ground_truth(
     world: &World,
     config: &MissionConfig,
-    truth: &[StampedPose],
+    truth: Option<&[StampedPose]>,
     odometry_poses: &[Isometry3<f64>],
     refined: &[Isometry3<f64>],
     mesh: &TriangleMesh,
@@ -651,8 +652,6 @@ fn score_against_ground_truth(
     let Some((rock, _)) = nearest_rock(world, &Point3::from(report.center)) else {
         return;
     };
-    report.ate_before_ba_m = ate_rmse(truth, odometry_poses);
-    report.ate_after_ba_m = ate_rmse(truth, refined);
     if let Some(pedestal) = &rock.pedestal
         && let Ok(gt) = analyze(
             &rock.mesh,
@@ -663,6 +662,12 @@ fn score_against_ground_truth(
         report.alpha_min_gt_deg = Some(gt.alpha_min_deg);
         report.alpha_error_deg = report.alpha_min_deg.map(|a| (a - gt.alpha_min_deg).abs());
     }
+    // The trajectory and mesh scores need the true poses (a recorded flight keeps them apart).
+    let Some(truth) = truth else {
+        return;
+    };
+    report.ate_before_ba_m = ate_rmse(truth, odometry_poses);
+    report.ate_after_ba_m = ate_rmse(truth, refined);
     if let Some([at_1cm, at_2cm]) = score_mesh(world, rock, truth, refined, mesh, camera) {
         report.fscore_1cm = Some(at_1cm.fscore);
         report.fscore_2cm = Some(at_2cm.fscore);
