@@ -14,6 +14,8 @@ use scarp_planning::plot::{PlotConfig, PlotScene, write_side_view_png, write_top
 use scarp_planning::prelude::*;
 use serde::Serialize;
 
+use crate::mission::environment::planning_environment;
+
 /// Plan and fly the mapping rings around a target.
 #[derive(Debug, Args)]
 pub struct PlanArgs {
@@ -85,44 +87,6 @@ fn target_cylinder(world: &World, args: &PlanArgs) -> anyhow::Result<VerticalCyl
         z,
         z + args.height,
     )?)
-}
-
-/// The world's terrain and every rock and pedestal, as the planner sees them.
-pub fn planning_environment(world: &World) -> anyhow::Result<Environment> {
-    let h = &world.heightfield;
-    let terrain = Heightfield::new(
-        h.origin_x_m,
-        h.origin_y_m,
-        h.spacing_m,
-        h.nx,
-        h.ny,
-        h.heights_m.iter().map(|&z| f64::from(z)).collect(),
-    )?;
-    let mesh_obstacle = |m: &scarp_slam::TriangleMesh| Obstacle::Mesh {
-        positions_m: m
-            .positions
-            .iter()
-            .map(|p| [f64::from(p.x), f64::from(p.y), f64::from(p.z)])
-            .collect(),
-        faces: m.faces.clone(),
-    };
-    let obstacles: Vec<Obstacle> = world_obstacles(world)
-        .map(|(_, mesh)| mesh_obstacle(mesh))
-        .collect();
-    Ok(Environment::new(Some(terrain), &obstacles)?)
-}
-
-/// The world's obstacles in the planning environment's order (each rock, then its pedestal),
-/// each with its name in reports (`rock <id>`, `pedestal <id>`): obstacle index i of
-/// [`planning_environment`] is item i here.
-pub fn world_obstacles(world: &World) -> impl Iterator<Item = (String, &scarp_slam::TriangleMesh)> {
-    world.rocks.iter().flat_map(|r| {
-        std::iter::once((format!("rock {}", r.id), &r.mesh)).chain(
-            r.pedestal
-                .as_ref()
-                .map(|p| (format!("pedestal {}", r.id), p)),
-        )
-    })
 }
 
 /// What `flight.json` holds: the flight metrics plus the plan's size.

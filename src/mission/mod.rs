@@ -17,6 +17,7 @@
 pub mod catalog;
 pub mod config;
 pub mod coverage;
+pub mod environment;
 pub mod evaluation;
 pub mod html;
 pub mod mapping;

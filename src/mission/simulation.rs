@@ -165,7 +165,7 @@ impl<'a> Mission<'a> {
         let world = inputs.world;
         let cam = &config.planning.camera;
         let camera = PinholeCamera::from_hfov(cam.width_px, cam.height_px, cam.hfov_deg)?;
-        let env = crate::cli::plan::planning_environment(world)?;
+        let env = super::environment::planning_environment(world)?;
         let (x0, y0, x1, y1) = world.heightfield.extent();
         let inset = config.search_inset_m;
         let area = SearchArea::Rectangle {
@@ -234,7 +234,7 @@ impl<'a> Mission<'a> {
             frame_index: 0,
             safety: SafetyLog::new(
                 config.collision_radius_m,
-                crate::cli::plan::world_obstacles(world)
+                super::environment::world_obstacles(world)
                     .map(|(name, _)| name)
                     .collect(),
             ),

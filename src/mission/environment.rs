@@ -1,0 +1,43 @@
+//! The world as the planner sees it: its terrain as a heightfield and every rock and pedestal as
+//! a mesh obstacle, for planning, the clearance checks and the collision log.
+
+use scarp_datasets::world::World;
+use scarp_planning::prelude::{Environment, Heightfield, Obstacle};
+
+/// The world's terrain and every rock and pedestal, as the planner sees them.
+pub fn planning_environment(world: &World) -> anyhow::Result<Environment> {
+    let h = &world.heightfield;
+    let terrain = Heightfield::new(
+        h.origin_x_m,
+        h.origin_y_m,
+        h.spacing_m,
+        h.nx,
+        h.ny,
+        h.heights_m.iter().map(|&z| f64::from(z)).collect(),
+    )?;
+    let mesh_obstacle = |m: &scarp_slam::TriangleMesh| Obstacle::Mesh {
+        positions_m: m
+            .positions
+            .iter()
+            .map(|p| [f64::from(p.x), f64::from(p.y), f64::from(p.z)])
+            .collect(),
+        faces: m.faces.clone(),
+    };
+    let obstacles: Vec<Obstacle> = world_obstacles(world)
+        .map(|(_, mesh)| mesh_obstacle(mesh))
+        .collect();
+    Ok(Environment::new(Some(terrain), &obstacles)?)
+}
+
+/// The world's obstacles in the planning environment's order (each rock, then its pedestal),
+/// each with its name in reports (`rock <id>`, `pedestal <id>`): obstacle index i of
+/// [`planning_environment`] is item i here.
+pub fn world_obstacles(world: &World) -> impl Iterator<Item = (String, &scarp_slam::TriangleMesh)> {
+    world.rocks.iter().flat_map(|r| {
+        std::iter::once((format!("rock {}", r.id), &r.mesh)).chain(
+            r.pedestal
+                .as_ref()
+                .map(|p| (format!("pedestal {}", r.id), p)),
+        )
+    })
+}
