@@ -48,6 +48,23 @@ pub fn median(values: &[f64]) -> Option<f64> {
     })
 }
 
+/// The `p`-quantile of already sorted `sorted` values, linearly interpolated between the two
+/// nearest ranks (`p` clamped to [0, 1]); NaN for an empty slice.
+///
+/// ```
+/// use scarp_slam::stats::percentile_sorted;
+/// assert_eq!(percentile_sorted(&[1.0, 2.0, 4.0], 0.75), 3.0);
+/// ```
+pub fn percentile_sorted(sorted: &[f64], p: f64) -> f64 {
+    if sorted.is_empty() {
+        return f64::NAN;
+    }
+    let rank = p.clamp(0.0, 1.0) * (sorted.len() - 1) as f64;
+    let lo = rank.floor() as usize;
+    let hi = rank.ceil() as usize;
+    sorted[lo] + (sorted[hi] - sorted[lo]) * (rank - lo as f64)
+}
+
 /// Root mean square; `None` for an empty slice.
 pub fn rms(values: &[f64]) -> Option<f64> {
     if values.is_empty() {

@@ -31,6 +31,7 @@
 //! map is anchored at the first state estimate, which can be a metre or more off vertically.
 //! `tests/map_odometry_cli.rs` runs a reduced 48-frame version.
 
+use scarp_slam::stats::percentile_sorted as percentile;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -193,10 +194,6 @@ pub enum TrackingReferenceArg {
     Keyframe,
     /// A raycast of the model being built, at the previous frame's pose.
     Model,
-}
-
-fn percentile(sorted: &[f64], p: f64) -> f64 {
-    crate::evaluation::mesh::percentile_sorted(sorted, p)
 }
 
 /// Runs `scarp map`.

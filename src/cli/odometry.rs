@@ -213,13 +213,7 @@ fn renormalized(t: &Isometry3<f64>) -> Isometry3<f64> {
 }
 
 fn median(values: &[f64]) -> f64 {
-    let mut v = values.to_vec();
-    v.sort_by(f64::total_cmp);
-    match v.len() {
-        0 => 0.0,
-        n if n % 2 == 1 => v[n / 2],
-        n => 0.5 * (v[n / 2 - 1] + v[n / 2]),
-    }
+    scarp_slam::stats::median(values).unwrap_or(0.0)
 }
 
 fn poses_of(sequence: &Sequence, frames: usize, truth: bool) -> Option<Vec<StampedPose>> {

@@ -162,13 +162,7 @@ fn truth_at(boxes: &[BoxRecord], t: f64) -> Vec<TruthBox> {
 
 /// The `p`-quantile (0..=1, nearest rank) of `values`; 0 when empty.
 fn quantile(values: &[f64], p: f64) -> f64 {
-    if values.is_empty() {
-        return 0.0;
-    }
-    let mut sorted = values.to_vec();
-    sorted.sort_by(f64::total_cmp);
-    let rank = (p * (sorted.len() - 1) as f64).round() as usize;
-    sorted[rank.min(sorted.len() - 1)]
+    scarp_slam::stats::quantile(values, p).unwrap_or(0.0)
 }
 
 /// Runs `scarp track`.

@@ -122,17 +122,9 @@ pub struct MeshEvaluation {
     pub gt_visible_fraction: f64,
 }
 
-/// Percentile `p` ∈ [0, 1] of sorted values by linear interpolation between order statistics
-/// (rank p·(n − 1), as NumPy's default). NaN for an empty slice.
-pub fn percentile_sorted(sorted: &[f64], p: f64) -> f64 {
-    if sorted.is_empty() {
-        return f64::NAN;
-    }
-    let rank = p.clamp(0.0, 1.0) * (sorted.len() - 1) as f64;
-    let lo = rank.floor() as usize;
-    let hi = rank.ceil() as usize;
-    sorted[lo] + (sorted[hi] - sorted[lo]) * (rank - lo as f64)
-}
+// Percentile p ∈ [0, 1] of sorted values by linear interpolation between order statistics
+// (rank p·(n − 1), as NumPy's default), shared with every crate.
+pub use scarp_slam::stats::percentile_sorted;
 
 /// Scores given distance sets: `accuracy` from reconstruction samples to the ground truth,
 /// `completeness` from ground-truth samples to the reconstruction.

@@ -255,14 +255,7 @@ fn rmse(values: &[f64]) -> f64 {
 }
 
 fn median(values: &[f64]) -> f64 {
-    let mut sorted = values.to_vec();
-    sorted.sort_by(f64::total_cmp);
-    let n = sorted.len();
-    match n {
-        0 => 0.0,
-        _ if n % 2 == 1 => sorted[n / 2],
-        _ => 0.5 * (sorted[n / 2 - 1] + sorted[n / 2]),
-    }
+    scarp_slam::stats::median(values).unwrap_or(0.0)
 }
 
 /// The relative pose error E = (Gᵢ⁻¹Gⱼ)⁻¹(Pᵢ⁻¹Pⱼ): (translation norm, rotation angle in rad).

@@ -84,10 +84,9 @@ const ABOVE_GROUND_M: f64 = 0.25;
 /// Fewest target points [`center_in_box`] accepts.
 const MIN_TARGET_POINTS: usize = 30;
 
-/// The `q`-quantile of `values` (sorted in place); `values` must not be empty.
+/// The `q`-quantile of `values` (sorted in place; nearest rank); NaN when empty.
 fn quantile(values: &mut [f64], q: f64) -> f64 {
-    values.sort_by(f64::total_cmp);
-    values[((values.len() - 1) as f64 * q).round() as usize]
+    scarp_slam::stats::quantile_in_place(values, q).unwrap_or(f64::NAN)
 }
 
 /// The centre of the object in `bbox`, from the depth points inside the box, in the frame of

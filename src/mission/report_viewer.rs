@@ -212,18 +212,14 @@ fn ground_truth_in_map_frame(
     Some(gt)
 }
 
+/// The nearest-rank `p`-quantile of the finite `values`; `None` without any.
 fn percentile(values: &[f32], p: f64) -> Option<f64> {
     let mut v: Vec<f64> = values
         .iter()
         .map(|&x| f64::from(x))
         .filter(|x| x.is_finite())
         .collect();
-    if v.is_empty() {
-        return None;
-    }
-    v.sort_by(f64::total_cmp);
-    let i = ((v.len() - 1) as f64 * p).round() as usize;
-    Some(v[i])
+    scarp_slam::stats::quantile_in_place(&mut v, p)
 }
 
 fn view_data(world: Option<&World>, target: &TargetReport, target_dir: &Path) -> Option<ViewData> {

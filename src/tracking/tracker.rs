@@ -508,15 +508,7 @@ impl Tracker {
 
 /// Median of a non-empty slice (mean of the two middle values for even lengths).
 fn median(values: &mut [f64]) -> f64 {
-    values.sort_by(f64::total_cmp);
-    let n = values.len();
-    if n == 0 {
-        0.0
-    } else if n % 2 == 1 {
-        values[n / 2]
-    } else {
-        0.5 * (values[n / 2 - 1] + values[n / 2])
-    }
+    scarp_slam::stats::median(values).unwrap_or(0.0)
 }
 
 /// Greedy one-to-one matching of tracks to detections by decreasing IoU, keeping pairs with
