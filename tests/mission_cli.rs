@@ -238,7 +238,8 @@ fn simulate_small(extra: &str, flags: &[&str]) -> (serde_json::Value, String) {
 /// The state estimate reads 1.5 m above the truth all flight long, so flying on it alone puts
 /// the base ring (planned 1.5 m above the ground) into the ground. The rangefinder senses the
 /// error and the monitor removes it: no collision, the true clearance stays ≥ 0.5 m, and the
-/// target is mapped. The same flight without the monitor collides (the test can fail).
+/// target is mapped. The same flight without the monitor comes closer than 0.5 m (the test can
+/// fail).
 #[test]
 fn the_monitor_flies_out_a_vertical_estimator_bias() {
     let bias = "[estimator]\nbias_m = [0.0, 0.0, 1.5]\n";
@@ -257,9 +258,12 @@ fn the_monitor_flies_out_a_vertical_estimator_bias() {
     assert_eq!(target["status"], "mapped", "{target:#}");
     assert!(target["fscore_2cm"].as_f64().unwrap() > 0.85, "{target:#}");
 
+    // Without the monitor the same flight breaks the 0.5 m the vehicle must keep (it came
+    // within 0.27–0.36 m, colliding or not as the detector's draws place the rings).
     let (json, _) = unmonitored.join().unwrap();
-    assert!(json["collisions"].as_u64().unwrap() > 0, "{json:#}");
-    assert!(json["min_clearance_m"].as_f64().unwrap() < 0.5);
+    let unmonitored_min = json["min_clearance_m"].as_f64().unwrap();
+    assert!(unmonitored_min < 0.5, "{json:#}");
+    assert!(unmonitored_min < min, "{json:#}");
 }
 
 /// A collision ends the flight: `crashed`, with the event and a WARN line.
