@@ -116,8 +116,27 @@ pub fn read_tum_trajectory(path: &Path) -> Result<Vec<StampedPose>, TumError> {
     })
 }
 
-/// Formats poses as TUM text, with a header comment. Timestamps get 6 decimals (microseconds);
-/// pose values get 17 significant digits, so reading back is exact to f64 round-off.
+/// A timestamp as sequence files write it: to the microsecond (`0.250000`) when that reads back
+/// as the same number, else in full (`22.800000000000765`), so that a reader gets the very
+/// time the writer had (the simulated detector draws by it).
+///
+/// ```
+/// use scarp_export::tum::format_timestamp;
+/// assert_eq!(format_timestamp(0.25), "0.250000");
+/// assert_eq!(format_timestamp(22.800000000000765), "22.800000000000765");
+/// ```
+pub fn format_timestamp(timestamp_s: f64) -> String {
+    let short = format!("{timestamp_s:.6}");
+    if short.parse::<f64>() == Ok(timestamp_s) {
+        short
+    } else {
+        format!("{timestamp_s}")
+    }
+}
+
+/// Formats poses as TUM text, with a header comment. Timestamps get 6 decimals (microseconds),
+/// or every digit when 6 would change them ([`format_timestamp`]); pose values get 17
+/// significant digits, so reading back is exact to f64 round-off.
 pub fn format_tum_trajectory(poses: &[StampedPose], comment: &str) -> String {
     let mut text = String::new();
     for line in comment.lines() {
@@ -128,7 +147,7 @@ pub fn format_tum_trajectory(poses: &[StampedPose], comment: &str) -> String {
     text.push_str("# timestamp tx ty tz qx qy qz qw\n");
     for pose in poses {
         let v = tum_from_isometry(&pose.world_from_camera);
-        text.push_str(&format!("{:.6}", pose.timestamp_s));
+        text.push_str(&format_timestamp(pose.timestamp_s));
         for value in v {
             text.push_str(&format!(" {value:.17e}"));
         }

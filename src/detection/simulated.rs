@@ -308,10 +308,7 @@ impl SimulatedDetector {
     pub fn detect_mask(&self, mask: &MaskImage, timestamp_s: f64) -> Vec<Detection> {
         let c = &self.config;
         let (w, h) = (mask.width(), mask.height());
-        // Seeded by the time to the microsecond, as sequence files store it: a recorded
-        // flight replays the live flight's detections, whatever float noise its clock had.
-        let microseconds = (timestamp_s * 1e6).round() as i64;
-        let mut rng = Xoshiro256PlusPlus::seed_from_u64(derive_seed(c.seed, microseconds as u64));
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(derive_seed(c.seed, timestamp_s.to_bits()));
         let mut out = Vec::new();
         for stats in instance_stats(mask) {
             let Some(&role) = self.roles.get(&stats.id) else {

@@ -33,7 +33,7 @@ use scarp_datasets::sequence::{
 };
 use scarp_datasets::world::World;
 use scarp_export::atomic::write_bytes_atomically;
-use scarp_export::tum::{StampedPose, write_tum_trajectory};
+use scarp_export::tum::{StampedPose, format_timestamp, write_tum_trajectory};
 use scarp_slam::{PinholeCamera, RgbdFrame};
 use serde::{Deserialize, Serialize};
 
@@ -168,7 +168,8 @@ impl FlightRecorder {
             .target()
             .map_or_else(|| "-".to_string(), |id| id.to_string());
         self.flight_log.push_str(&format!(
-            "{t:.6} {mount_pitch_down_deg:.4} {} {target}\n",
+            "{} {mount_pitch_down_deg:.4} {} {target}\n",
+            format_timestamp(t),
             mode.as_str()
         ));
         let queue = self

@@ -4,7 +4,7 @@ use std::path::Path;
 
 use rayon::prelude::*;
 use scarp_export::atomic::write_bytes_atomically;
-use scarp_export::tum::{StampedPose, write_tum_trajectory};
+use scarp_export::tum::{StampedPose, format_timestamp, write_tum_trajectory};
 use scarp_slam::PinholeCamera;
 use serde::Serialize;
 
@@ -61,7 +61,11 @@ pub fn write_image_lists(dir: &Path, timestamps_s: &[f64]) -> Result<(), Dataset
     for (list, sub) in [("rgb.txt", "rgb"), ("depth.txt", "depth")] {
         let mut text = format!("# {sub} images: timestamp path\n");
         for &t in timestamps_s {
-            text.push_str(&format!("{t:.6} {sub}/{}\n", frame_name(t)));
+            text.push_str(&format!(
+                "{} {sub}/{}\n",
+                format_timestamp(t),
+                frame_name(t)
+            ));
         }
         write_bytes_atomically(dir.join(list), text.as_bytes())?;
     }
