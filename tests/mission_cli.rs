@@ -177,7 +177,10 @@ fn the_recorded_flight_processes_into_the_same_catalog(
         .iter()
         .find(|t| &t["id"] == id)
         .unwrap_or_else(|| panic!("target {id} not processed: {json:#}"));
-    assert_eq!(t["status"], live_target["status"], "{t:#}");
+    // Offline a target is mapped when analysed (the coverage threshold only ends a live flight).
+    if live_target["status"] == "mapped" {
+        assert_eq!(t["status"], "mapped", "{t:#}");
+    }
     if let (Some(a), Some(b)) = (
         t["alpha_min_deg"].as_f64(),
         live_target["alpha_min_deg"].as_f64(),

@@ -68,6 +68,8 @@ pub struct MappingSession {
     /// Keep every n-th mapped frame in `between` (0: none).
     between_stride: usize,
     frames_mapped: usize,
+    /// Whether the target counts as mapped only once the coverage threshold is reached.
+    coverage_required: bool,
     /// The last mapped frame's odometry position minus its true position (simulation only:
     /// what a controller flying on the odometry would be off by).
     navigation_error_m: Option<Vector3<f64>>,
@@ -232,8 +234,19 @@ impl MappingSession {
             between: Vec::new(),
             between_stride: m.reintegration_frame_stride,
             frames_mapped: 0,
+            coverage_required: true,
             navigation_error_m: None,
         })
+    }
+
+    /// The same session, whose target counts as mapped once analysed, whatever its coverage.
+    ///
+    /// Why: the live mission requires the coverage threshold, which is also what ends its
+    /// mapping flight; processing a recording offline cannot fly more, and its 1 mm depth PNGs
+    /// can move a coverage right at the threshold by a cell. The coverage stays in the row.
+    pub fn without_coverage_requirement(mut self) -> Self {
+        self.coverage_required = false;
+        self
     }
 
     /// The target being mapped.
@@ -274,7 +287,9 @@ impl MappingSession {
             "target {}: the map already holds frames; its cylinder cannot move",
             self.target_id
         );
+        let coverage_required = self.coverage_required;
         *self = Self::new(self.target_id, cylinder, &self.camera, config)?;
+        self.coverage_required = coverage_required;
         Ok(())
     }
 
@@ -437,8 +452,9 @@ pub fn mapped_status(outcome: anyhow::Result<bool>, report: &mut TargetReport) -
 /// Finishes a target: bundle adjustment of the stored frames, re-integration, mesh, fragility,
 /// files in `dir` (`mesh.ply`, `mesh.glb`, `points.ply`, `fragility.json`, view PNGs) and, with
 /// ground truth (`world`, and every keyframe's true pose), the scores in `report`. Without a
-/// world, the view PNGs are lit by the built-in default world's sun. Returns whether the target counts as mapped (coverage
-/// reached and fragility analysed).
+/// world, the view PNGs are lit by the built-in default world's sun. Returns whether the
+/// target counts as mapped (coverage reached, unless the session does not require it, see
+/// [`MappingSession::without_coverage_requirement`]; and fragility analysed).
 ///
 /// # Errors
 /// Only writing errors; a failed analysis is recorded in `report.error`.
@@ -511,7 +527,8 @@ pub fn finish_target(
     // The scan is open (ROI cut, unseen parts): cut the rock off above its support, extrapolate
     // its contact from the basal profile, close it and analyse it.
     let fragility = analyze_scan(&mesh, &config.fragility).map(|(_, analysis)| analysis);
-    let mut mapped = complete;
+    let coverage_required = session.coverage_required;
+    let mut mapped = complete || !coverage_required;
     match &fragility {
         Ok(analysis) => {
             let r = &analysis.report;
@@ -528,7 +545,7 @@ pub fn finish_target(
             mapped = false;
         }
     }
-    if !complete && report.error.is_none() {
+    if !complete && coverage_required && report.error.is_none() {
         report.error = Some(format!(
             "coverage {:.2} below the threshold {:.2}",
             report.coverage, config.coverage.threshold

@@ -23,7 +23,10 @@
 //!    sees the rock.
 //! 4. **Finishing:** bundle adjustment, re-integration, mesh, fragility and export per target,
 //!    then `mission.json`, `targets.csv`, `targets.geojson` and `report.html` as a live
-//!    mission writes them, without the ground-truth columns unless a world is given.
+//!    mission writes them, without the ground-truth columns unless a world is given. A target
+//!    is mapped when its fragility is analysed: the coverage threshold, which ends a live
+//!    mapping flight, is reported but not required (the recorded flight cannot be extended,
+//!    and 1 mm depth PNGs can move a coverage right at the threshold by a cell).
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -322,7 +325,8 @@ pub fn process_flight(inputs: &ProcessInputs<'_>) -> anyhow::Result<MissionRepor
             target.cylinder = Some(cylinder);
         }
         sessions.push((
-            MappingSession::new(state.id, &cylinder, &camera, config)?,
+            MappingSession::new(state.id, &cylinder, &camera, config)?
+                .without_coverage_requirement(),
             0,
             plan.map_frames_of,
         ));
