@@ -8,7 +8,6 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use clap::{Args, ValueEnum};
 use nalgebra::Isometry3;
-use scarp_datasets::noise::derive_seed;
 use scarp_datasets::sequence::Sequence;
 use scarp_datasets::world::{RockRole, World};
 use scarp_export::atomic::write_bytes_atomically;
@@ -17,14 +16,12 @@ use scarp_slam::PointCloud;
 use serde::Serialize;
 
 use crate::detection::simulated::roles_from_boxes;
-use crate::detection::{
-    BoundingBox, Detection, Detector, ReplayDetector, SimulatedDetector, SimulatedDetectorConfig,
-};
+use crate::detection::{BoundingBox, Detection, Detector, ReplayDetector};
 use crate::evaluation::mesh::MeshDistance;
 use crate::localization::{LocalizationConfig, Target, TargetStatus};
 use crate::mission::config::MissionConfig;
 use crate::mission::evaluation::{EstimatorErrorByTarget, estimate_frame_error_m};
-use crate::mission::perception::{BoxSource, Perception};
+use crate::mission::perception::{BoxSource, Perception, mission_detector};
 
 /// Localize targets in a sequence with the bounding-box depth filter.
 #[derive(Debug, Args)]
@@ -301,12 +298,10 @@ pub fn localize(args: &LocalizeArgs) -> anyhow::Result<LocalizeSummary> {
     // filter, only the detector's and the filter's seeds come from `--seed`.
     let defaults = MissionConfig::default();
     let detector: Box<dyn Detector> = match args.detector {
-        DetectorKind::Simulated => Box::new(SimulatedDetector::new(
-            SimulatedDetectorConfig {
-                seed: derive_seed(args.seed, 0xde7),
-                ..defaults.detection.simulated.clone()
-            },
+        DetectorKind::Simulated => Box::new(mission_detector(
+            &defaults.detection.simulated,
             roles_from_boxes(&seq.boxes),
+            args.seed,
         )?),
         DetectorKind::Groundtruth => Box::new(ReplayDetector::new(ground_truth_detections(&seq))),
     };

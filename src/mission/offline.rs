@@ -34,7 +34,6 @@ use std::time::Instant;
 
 use anyhow::Context;
 use nalgebra::{Isometry3, Point3};
-use scarp_datasets::noise::derive_seed;
 use scarp_datasets::sequence::Sequence;
 use scarp_datasets::world::World;
 use scarp_slam::PinholeCamera;
@@ -46,11 +45,10 @@ use super::mapping::{
     finish_target, mapped_status,
 };
 use super::mode::{FlightLogEntry, Mode};
-use super::perception::{BoxSource, Perception, TargetState};
+use super::perception::{Perception, TargetState};
 use super::record::FlightOrigin;
 use super::report::{MissionReport, ModeChange, StageTimings};
 use super::simulation::ground_height_near;
-use crate::detection::SimulatedDetector;
 use crate::detection::simulated::roles_from_boxes;
 
 /// What to process and how.
@@ -175,18 +173,7 @@ pub fn process_flight(inputs: &ProcessInputs<'_>) -> anyhow::Result<MissionRepor
     };
 
     // 1. Search detection and localization.
-    let mut detector_config = config.detection.simulated.clone();
-    detector_config.seed = derive_seed(inputs.seed, 0xde7);
-    let mut perception = Perception::with_detector(
-        Box::new(SimulatedDetector::new(
-            detector_config,
-            roles_from_boxes(&seq.boxes),
-        )?),
-        config.tracker.clone(),
-        BoxSource::UpdatedTracks,
-        config.localization,
-        inputs.seed,
-    )?;
+    let mut perception = Perception::with_roles(roles_from_boxes(&seq.boxes), config, inputs.seed)?;
     let search_period_s = 1.0 / config.search_camera_rate_hz;
     let mut last_perceived: Option<f64> = None;
     let mut previous_mode = Mode::Search;
@@ -255,8 +242,11 @@ pub fn process_flight(inputs: &ProcessInputs<'_>) -> anyhow::Result<MissionRepor
         timings.detect_s += step.detect_s;
         timings.track_s += step.track_s;
         timings.localize_s += step.localize_s;
-        for state in perception.target_states() {
-            found_at.entry(state.id).or_insert(t);
+        let catalog = perception.catalog();
+        for target in catalog.targets() {
+            if target.is_confirmed(catalog.config()) {
+                found_at.entry(target.id()).or_insert(t);
+            }
         }
         for id in &step.updated {
             last_update_frame.insert(*id, index);

@@ -18,7 +18,9 @@ use scarp_slam::image::gray_from_rgb;
 use scarp_slam::{PinholeCamera, RgbdFrame};
 
 use super::config::MissionConfig;
-use crate::detection::simulated::SimulatedDetector;
+use crate::detection::simulated::{
+    RoleMap, SimulatedDetector, SimulatedDetectorConfig, roles_from_world,
+};
 use crate::detection::{BoundingBox, Detection, Detector};
 use crate::localization::catalog::{ObserveReport, TargetCatalog};
 use crate::localization::config::LocalizationConfig;
@@ -196,6 +198,25 @@ pub struct Perception {
     frames: u64,
 }
 
+/// The mission's simulated detector with `config`, for the rocks of `roles`, its draws seeded
+/// from the run's `seed` as every mission and `scarp localize` seed it.
+///
+/// # Errors
+/// An invalid detector setting.
+pub fn mission_detector(
+    config: &SimulatedDetectorConfig,
+    roles: RoleMap,
+    seed: u64,
+) -> Result<SimulatedDetector, crate::detection::DetectionError> {
+    SimulatedDetector::new(
+        SimulatedDetectorConfig {
+            seed: derive_seed(seed, 0xde7),
+            ..config.clone()
+        },
+        roles,
+    )
+}
+
 impl Perception {
     /// The simulated detector for `world`'s rocks, a fresh tracker and an empty catalog, with the
     /// mission's settings.
@@ -203,10 +224,17 @@ impl Perception {
     /// # Errors
     /// Invalid detector, tracker or localization settings.
     pub fn new(world: &World, config: &MissionConfig, seed: u64) -> anyhow::Result<Self> {
-        let mut detector_config = config.detection.simulated.clone();
-        detector_config.seed = derive_seed(seed, 0xde7);
+        Self::with_roles(roles_from_world(world), config, seed)
+    }
+
+    /// As [`Self::new`], for the rocks whose roles `roles` gives (a recorded flight's
+    /// `boxes.txt`, see [`crate::detection::simulated::roles_from_boxes`]).
+    ///
+    /// # Errors
+    /// Invalid detector, tracker or localization settings.
+    pub fn with_roles(roles: RoleMap, config: &MissionConfig, seed: u64) -> anyhow::Result<Self> {
         Self::with_detector(
-            Box::new(SimulatedDetector::for_world(detector_config, world)?),
+            Box::new(mission_detector(&config.detection.simulated, roles, seed)?),
             config.tracker.clone(),
             BoxSource::UpdatedTracks,
             config.localization,
