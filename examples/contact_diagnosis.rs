@@ -97,6 +97,10 @@ fn main() -> Result<()> {
             if let Ok((closed, a)) = &map_result {
                 let readings: Vec<String> = scarp::fragility::scan::ContactHypothesis::ensemble(
                     1.96 * config.uncertainty.contact_height_sigma_m,
+                    closed
+                        .support_outline
+                        .as_ref()
+                        .is_some_and(|o| o.has_gaps()),
                 )
                 .iter()
                 .map(|h| {

@@ -15,7 +15,11 @@
 //!    far wider than the contact. Instead, in each azimuth sector around the rock's axis, the
 //!    radius of the rock's surface is measured in the slabs just above the wedge's tip and
 //!    extrapolated down to the plane with r² linear in height (exact for an ellipsoidal base cut
-//!    flat). The contact polygon is the convex hull of those radii.
+//!    flat). The contact polygon is the convex hull of those radii, clipped by the support's
+//!    edge seen just below the plane ([`SupportOutline`]): a flat-bottomed rock overhanging a
+//!    narrower pedestal touches only the pedestal's top, whatever its own profile says. Where
+//!    no camera saw the support's edge, the point estimate interpolates it around the axis and
+//!    the α_min interval also spans the edge unbounded there ([`OutlineGaps`]).
 //! 5. Closing: every boundary loop (the cut, and holes where no camera looked) is closed by a
 //!    fan around its centroid, wound to face outward.
 //!
@@ -211,9 +215,9 @@ pub struct ClosedScan {
     pub contact_polygon: Vec<[f64; 3]>,
     /// The basal profile the contact is extrapolated from.
     pub profile: BasalProfile,
-    /// The outline (convex hull, xy metres) of the support's top seen around the rock, when the
-    /// support plane was found: the contact cannot reach beyond it.
-    pub support_outline: Option<Vec<Point2<f64>>>,
+    /// The edge of the support's top seen around the rock, when the support plane was found
+    /// and its side seen in enough sectors: the contact cannot reach beyond it.
+    pub support_outline: Option<SupportOutline>,
     /// Boundary loops that were closed (the cut plus holes).
     pub loops_closed: usize,
     /// Height of the neck the support plane was searched around, metres.
@@ -229,9 +233,12 @@ pub struct ClosedScan {
 const UP_COS: f64 = 0.95;
 /// Height bins of the support-plane search, metres.
 const SUPPORT_BIN_M: f64 = 0.005;
-/// The band below the support plane whose surface outlines the support's top: from 1.5 cm
-/// (below the wedge the TSDF fills) to 6 cm under the plane, metres.
-const SUPPORT_BAND_M: (f64, f64) = (0.015, 0.06);
+/// The band below the support plane whose surface outlines the support's top, metres: from
+/// 1.5 cm (below the wedge the TSDF fills) to 15 cm under the plane. The rock's overhang often
+/// hides the support's first centimetres from every view (the squat block of library-b, seed 3,
+/// was seen there in 5 of 12 sectors, but in all 12 from 7 cm down), and the highest slab seen
+/// in each sector is the one read.
+const SUPPORT_BAND_M: (f64, f64) = (0.015, 0.15);
 /// Thickness of the basal profile's slabs, metres.
 const PROFILE_SLAB_M: f64 = 0.01;
 
@@ -330,51 +337,119 @@ fn support_plane_height(
     (area > 0.0).then(|| sum / area)
 }
 
-/// The outline of the support's top at `plane_z` (convex hull, xy metres): in each of
-/// `profile_sectors` sectors around `axis_xy`, the largest radius of the scan's surface in the
-/// highest slab measured from [`SUPPORT_BAND_M`] below the plane, up to `support_radius_m`. Seen
-/// from the side, this is the pedestal's edge where the rock's overhang hides the pedestal's top.
-/// `None` when fewer than `profile_min_near_fraction` of the sectors are measured (the
-/// support is not seen all round, so it bounds nothing).
-fn support_outline(
-    mesh: &TriangleMesh,
-    axis_xy: &Point2<f64>,
-    plane_z: f64,
-    config: &ScanConfig,
-) -> Option<Vec<Point2<f64>>> {
-    let sectors = config.profile_sectors;
-    let slabs = ((SUPPORT_BAND_M.1 - SUPPORT_BAND_M.0) / PROFILE_SLAB_M).round() as usize;
-    // `highest[sector]`: (slab index from the top, largest radius in it).
-    let mut highest: Vec<Option<(usize, f64)>> = vec![None; sectors];
-    for p in &mesh.positions {
-        let depth = plane_z - f64::from(p.z) - SUPPORT_BAND_M.0;
-        let xy = Point2::new(f64::from(p.x), f64::from(p.y));
-        let r = (xy - axis_xy).norm();
-        if !(depth >= 0.0 && r <= config.support_radius_m) {
-            continue;
-        }
-        let k = (depth / PROFILE_SLAB_M) as usize;
-        if k >= slabs {
-            continue;
-        }
-        let entry = &mut highest[sector_of(&xy, axis_xy, sectors)];
-        *entry = match *entry {
-            Some((j, best)) if j < k => Some((j, best)),
-            Some((j, best)) if j == k => Some((j, best.max(r))),
-            _ => Some((k, r)),
-        };
-    }
-    let measured: Vec<Point2<f64>> = highest
-        .iter()
-        .enumerate()
-        .filter_map(|(s, h)| h.map(|(_, r)| sector_point(axis_xy, s, sectors, r)))
-        .collect();
-    if (measured.len() as f64) < config.profile_min_near_fraction * sectors as f64 {
-        return None;
-    }
-    let hull = convex_hull_2d(&measured);
-    (hull.len() >= 3 && polygon_signed_area(&hull) > 0.0).then_some(hull)
+/// The edge of the support's top seen around a rock: per azimuth sector around the basal
+/// profile's axis, the largest radius of the scan's surface in the highest slab measured from
+/// [`SUPPORT_BAND_M`] below the support plane, up to `support_radius_m`. Seen from the side,
+/// this is the pedestal's edge where the rock's overhang hides the pedestal's top. The contact
+/// cannot reach beyond it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SupportOutline {
+    /// The axis the sectors are taken around (xy, world metres).
+    pub axis_xy: Point2<f64>,
+    /// The edge's radius per sector, metres; `None` where no camera saw the support's side.
+    pub radius_m: Vec<Option<f64>>,
+    /// The radius that bounds nothing, for [`OutlineGaps::Open`], metres.
+    pub open_radius_m: f64,
 }
+
+/// How a [`SupportOutline`] bounds the contact in the sectors where the support was not seen.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum OutlineGaps {
+    /// The edge's radius interpolated around the axis between the nearest seen sectors: the
+    /// support's top is taken as smooth where it hides under the overhang.
+    Interpolated,
+    /// No bound: the support may reach as far as the rock does there.
+    Open,
+}
+
+impl SupportOutline {
+    /// Measures the outline of the support's top at `plane_z` around `axis_xy`; `None` when
+    /// fewer than [`MIN_OUTLINE_SECTORS`] sectors are seen (too little to interpolate from).
+    fn measure(
+        mesh: &TriangleMesh,
+        axis_xy: &Point2<f64>,
+        plane_z: f64,
+        config: &ScanConfig,
+    ) -> Option<Self> {
+        let sectors = config.profile_sectors;
+        let slabs = ((SUPPORT_BAND_M.1 - SUPPORT_BAND_M.0) / PROFILE_SLAB_M).round() as usize;
+        // `highest[sector]`: (slab index from the top, largest radius in it).
+        let mut highest: Vec<Option<(usize, f64)>> = vec![None; sectors];
+        for p in &mesh.positions {
+            let depth = plane_z - f64::from(p.z) - SUPPORT_BAND_M.0;
+            let xy = Point2::new(f64::from(p.x), f64::from(p.y));
+            let r = (xy - axis_xy).norm();
+            if !(depth >= 0.0 && r <= config.support_radius_m) {
+                continue;
+            }
+            let k = (depth / PROFILE_SLAB_M) as usize;
+            if k >= slabs {
+                continue;
+            }
+            let entry = &mut highest[sector_of(&xy, axis_xy, sectors)];
+            *entry = match *entry {
+                Some((j, best)) if j < k => Some((j, best)),
+                Some((j, best)) if j == k => Some((j, best.max(r))),
+                _ => Some((k, r)),
+            };
+        }
+        let outline = Self {
+            axis_xy: *axis_xy,
+            radius_m: highest.iter().map(|h| h.map(|(_, r)| r)).collect(),
+            open_radius_m: config.support_radius_m,
+        };
+        (outline.seen_sectors() >= MIN_OUTLINE_SECTORS).then_some(outline)
+    }
+
+    /// Sectors where the support's edge was seen.
+    pub fn seen_sectors(&self) -> usize {
+        self.radius_m.iter().filter(|r| r.is_some()).count()
+    }
+
+    /// Whether some sector was not seen.
+    pub fn has_gaps(&self) -> bool {
+        self.seen_sectors() < self.radius_m.len()
+    }
+
+    /// The edge's radius in every sector, the unseen ones filled as `gaps` says, metres.
+    pub fn filled_radii(&self, gaps: OutlineGaps) -> Vec<f64> {
+        let n = self.radius_m.len();
+        let seen: Vec<usize> = (0..n).filter(|&s| self.radius_m[s].is_some()).collect();
+        (0..n)
+            .map(|s| match (self.radius_m[s], gaps) {
+                (Some(r), _) => r,
+                (None, OutlineGaps::Open) => self.open_radius_m,
+                (None, OutlineGaps::Interpolated) => {
+                    // The nearest seen sectors before and after `s`, going round.
+                    let after = seen.iter().map(|&t| (t + n - s) % n).min().unwrap_or(0);
+                    let before = seen.iter().map(|&t| (s + n - t) % n).min().unwrap_or(0);
+                    let r_after = self.radius_m[(s + after) % n].unwrap_or(self.open_radius_m);
+                    let r_before =
+                        self.radius_m[(s + n - before) % n].unwrap_or(self.open_radius_m);
+                    let t = before as f64 / (before + after) as f64;
+                    r_before + t * (r_after - r_before)
+                }
+            })
+            .collect()
+    }
+
+    /// The outline as a convex polygon (xy metres, counter-clockwise), the unseen sectors
+    /// filled as `gaps` says; `None` when it has no area.
+    pub fn hull(&self, gaps: OutlineGaps) -> Option<Vec<Point2<f64>>> {
+        let n = self.radius_m.len();
+        let points: Vec<Point2<f64>> = self
+            .filled_radii(gaps)
+            .into_iter()
+            .enumerate()
+            .map(|(s, r)| sector_point(&self.axis_xy, s, n, r))
+            .collect();
+        let hull = convex_hull_2d(&points);
+        (hull.len() >= 3 && polygon_signed_area(&hull) > 0.0).then_some(hull)
+    }
+}
+
+/// A support outline seen in fewer sectors than this is not interpolated: it bounds nothing.
+const MIN_OUTLINE_SECTORS: usize = 3;
 
 /// The point `radius_m` from `axis_xy` along the middle of sector `sector` of `sectors`.
 fn sector_point(
@@ -387,11 +462,16 @@ fn sector_point(
     axis_xy + radius_m * nalgebra::Vector2::new(azimuth.cos(), azimuth.sin())
 }
 
-/// `hull` clipped by `outline` where they overlap, else `hull` itself.
-fn clipped_by(hull: Vec<Point2<f64>>, outline: Option<&Vec<Point2<f64>>>) -> Vec<Point2<f64>> {
-    match outline {
+/// `hull` clipped by `outline` (its unseen sectors filled as `gaps` says) where they overlap,
+/// else `hull` itself.
+fn clipped_by(
+    hull: Vec<Point2<f64>>,
+    outline: Option<&SupportOutline>,
+    gaps: OutlineGaps,
+) -> Vec<Point2<f64>> {
+    match outline.and_then(|o| o.hull(gaps)) {
         Some(outline) => {
-            let clipped = clip_convex(&hull, outline);
+            let clipped = clip_convex(&hull, &outline);
             if clipped.len() >= 3 { clipped } else { hull }
         }
         None => hull,
@@ -419,6 +499,8 @@ pub struct ContactHypothesis {
     pub fit_slabs: usize,
     /// Offset of the contact plane from the measured support plane, metres (positive up).
     pub plane_offset_m: f64,
+    /// How the support's outline bounds the contact where no camera saw the support.
+    pub gaps: OutlineGaps,
 }
 
 impl ContactHypothesis {
@@ -429,23 +511,33 @@ impl ContactHypothesis {
         skip_slabs: 0,
         fit_slabs: 4,
         plane_offset_m: 0.0,
+        gaps: OutlineGaps::Interpolated,
     };
 
     /// The readings the α_min interval spans: both models, fits from the lowest slab or one
     /// above it over 3, 4 or 6 slabs, and the plane at its measured height and
-    /// ±`plane_offset_m` from it.
-    pub fn ensemble(plane_offset_m: f64) -> Vec<ContactHypothesis> {
+    /// ±`plane_offset_m` from it, with the support outline's unseen sectors interpolated; and,
+    /// when `open_gaps`, each of those again with the unseen sectors unbounded.
+    pub fn ensemble(plane_offset_m: f64, open_gaps: bool) -> Vec<ContactHypothesis> {
         let mut out = Vec::new();
-        for model in [ProfileModel::SquaredRadius, ProfileModel::Radius] {
-            for skip_slabs in [0, 1] {
-                for fit_slabs in [3, 4, 6] {
-                    for offset in [-plane_offset_m, 0.0, plane_offset_m] {
-                        out.push(ContactHypothesis {
-                            model,
-                            skip_slabs,
-                            fit_slabs,
-                            plane_offset_m: offset,
-                        });
+        let gap_readings: &[OutlineGaps] = if open_gaps {
+            &[OutlineGaps::Interpolated, OutlineGaps::Open]
+        } else {
+            &[OutlineGaps::Interpolated]
+        };
+        for &gaps in gap_readings {
+            for model in [ProfileModel::SquaredRadius, ProfileModel::Radius] {
+                for skip_slabs in [0, 1] {
+                    for fit_slabs in [3, 4, 6] {
+                        for offset in [-plane_offset_m, 0.0, plane_offset_m] {
+                            out.push(ContactHypothesis {
+                                model,
+                                skip_slabs,
+                                fit_slabs,
+                                plane_offset_m: offset,
+                                gaps,
+                            });
+                        }
                     }
                 }
             }
@@ -586,6 +678,12 @@ impl BasalProfile {
         }
         Ok(hull)
     }
+}
+
+/// Area of a horizontal polygon given as xyz points, m².
+fn polygon_area_3d(polygon: &[[f64; 3]]) -> f64 {
+    let xy: Vec<Point2<f64>> = polygon.iter().map(|p| Point2::new(p[0], p[1])).collect();
+    polygon_signed_area(&xy).abs()
 }
 
 /// Least-squares line y = a + b·x through `points` (x, y); `None` when the x are all equal.
@@ -851,17 +949,27 @@ pub fn close_scan(mesh: &TriangleMesh, config: &ScanConfig) -> Result<ClosedScan
     }
     // The profile is measured on the scanned surface only, before the fans add vertices.
     let profile = BasalProfile::measure(&rock.positions, contact_height_m, config)?;
-    let support_outline = plane_z.and_then(|z| support_outline(mesh, &profile.axis_xy, z, config));
-    let contact_polygon = clipped_by(
-        profile.contact(&ContactHypothesis {
-            fit_slabs: config.profile_fit_slabs,
-            ..ContactHypothesis::POINT_ESTIMATE
-        })?,
+    let support_outline =
+        plane_z.and_then(|z| SupportOutline::measure(mesh, &profile.axis_xy, z, config));
+    let point_estimate = ContactHypothesis {
+        fit_slabs: config.profile_fit_slabs,
+        ..ContactHypothesis::POINT_ESTIMATE
+    };
+    let contact_polygon: Vec<[f64; 3]> = clipped_by(
+        profile.contact(&point_estimate)?,
         support_outline.as_ref(),
+        point_estimate.gaps,
     )
     .iter()
     .map(|p| [p.x, p.y, contact_height_m])
     .collect();
+    tracing::debug!(
+        neck_z,
+        plane_z,
+        support_outline_seen_sectors = support_outline.as_ref().map(SupportOutline::seen_sectors),
+        contact_area_m2 = polygon_area_3d(&contact_polygon),
+        "scan closed"
+    );
     let scanned_area_m2 = rock.surface_area();
     let loops_closed = fill_holes(&mut rock);
     let filled_area_m2 = rock.surface_area() - scanned_area_m2;
@@ -902,6 +1010,7 @@ impl ClosedScan {
         Ok(clipped_by(
             self.profile.contact(hypothesis)?,
             self.support_outline.as_ref(),
+            hypothesis.gaps,
         )
         .iter()
         .map(|p| [p.x, p.y, z])
@@ -962,21 +1071,34 @@ pub fn analyze_closed_scan(
     let mut unperturbed = config.clone();
     unperturbed.uncertainty.samples = 0;
     let first = analyse(&closed.contact_polygon, &unperturbed)?;
-    let hypotheses = ContactHypothesis::ensemble(1.96 * config.uncertainty.contact_height_sigma_m);
-    // (α_min, polygon) of each reading; the centre of mass hardly moves with the plane's
+    let open_gaps = closed
+        .support_outline
+        .as_ref()
+        .is_some_and(SupportOutline::has_gaps);
+    let hypotheses =
+        ContactHypothesis::ensemble(1.96 * config.uncertainty.contact_height_sigma_m, open_gaps);
+    // (α_min, polygon, gaps) of each reading; the centre of mass hardly moves with the plane's
     // millimetres, so the first analysis's serves them all.
-    let mut readings: Vec<(f64, Vec<[f64; 3]>)> = hypotheses
+    let mut readings: Vec<(f64, Vec<[f64; 3]>, OutlineGaps)> = hypotheses
         .iter()
-        .filter_map(|h| closed.contact_under(h).ok())
-        .filter_map(|polygon| Some((first.alpha_min_on_contact(&polygon)?, polygon)))
+        .filter_map(|h| Some((closed.contact_under(h).ok()?, h.gaps)))
+        .filter_map(|(polygon, gaps)| Some((first.alpha_min_on_contact(&polygon)?, polygon, gaps)))
         .collect();
     // A stable sort, so ties keep the ensemble's order and the choice is deterministic.
     readings.sort_by(|a, b| a.0.total_cmp(&b.0));
-    let median = readings
-        .get(readings.len().saturating_sub(1) / 2)
-        .map_or(&closed.contact_polygon, |(_, polygon)| polygon);
+    // The point estimate takes the support as smooth where it hides; the readings with its
+    // unseen sectors unbounded only widen the interval.
+    let interpolated: Vec<&Vec<[f64; 3]>> = readings
+        .iter()
+        .filter(|(_, _, gaps)| *gaps == OutlineGaps::Interpolated)
+        .map(|(_, polygon, _)| polygon)
+        .collect();
+    let median = interpolated
+        .get(interpolated.len().saturating_sub(1) / 2)
+        .copied()
+        .unwrap_or(&closed.contact_polygon);
     let mut analysis = analyse(median, config)?;
-    let alphas: Vec<f64> = readings.iter().map(|(a, _)| *a).collect();
+    let alphas: Vec<f64> = readings.iter().map(|(a, _, _)| *a).collect();
     analysis.widen_interval(
         &alphas,
         hypotheses.len() - alphas.len(),
@@ -1226,5 +1348,69 @@ mod tests {
         let mut cube = TriangleMesh::cuboid(Point3::new(0.0, 0.0, 0.0), Point3::new(1.0, 1.0, 1.0));
         cube.faces.truncate(10);
         assert!(close_scan(&cube, &ScanConfig::default()).is_err());
+    }
+
+    /// A support outline of radius 0.3 m about the origin, seen in the first `seen` of 36
+    /// sectors.
+    fn half_seen_outline(seen: usize) -> SupportOutline {
+        SupportOutline {
+            axis_xy: Point2::origin(),
+            radius_m: (0..36).map(|s| (s < seen).then_some(0.3)).collect(),
+            open_radius_m: 1.0,
+        }
+    }
+
+    #[test]
+    fn an_unseen_stretch_of_the_support_edge_is_interpolated_around_the_axis() {
+        let outline = half_seen_outline(18);
+        assert!(outline.has_gaps());
+        for r in outline.filled_radii(OutlineGaps::Interpolated) {
+            assert!((r - 0.3).abs() < 1e-12, "{r}");
+        }
+        let area = polygon_signed_area(&outline.hull(OutlineGaps::Interpolated).unwrap());
+        let circle = std::f64::consts::PI * 0.3f64.powi(2);
+        assert!((area / circle - 1.0).abs() < 0.01, "{area} vs {circle}");
+        // Open, the unseen half bounds nothing: it reaches the open radius.
+        let open = outline.filled_radii(OutlineGaps::Open);
+        assert_eq!(open.iter().filter(|&&r| r == 1.0).count(), 18);
+        assert!(polygon_signed_area(&outline.hull(OutlineGaps::Open).unwrap()) > 3.0 * circle);
+    }
+
+    #[test]
+    fn interpolation_across_a_gap_runs_between_its_two_edges() {
+        let mut outline = half_seen_outline(36);
+        outline.radius_m[10] = Some(0.2);
+        for s in 11..14 {
+            outline.radius_m[s] = None;
+        }
+        outline.radius_m[14] = Some(0.6);
+        let r = outline.filled_radii(OutlineGaps::Interpolated);
+        for (s, want) in [(11, 0.3), (12, 0.4), (13, 0.5)] {
+            assert!(
+                (r[s] - want).abs() < 1e-12,
+                "sector {s}: {} vs {want}",
+                r[s]
+            );
+        }
+    }
+
+    #[test]
+    fn the_support_edge_is_read_below_an_overhang_that_hides_its_top() {
+        // A pedestal 0.3 m in radius whose top 10 cm (under the rock's overhang) no camera saw:
+        // its side is seen only from 0.7 m down, and its top is at 0.8 m.
+        let ring = regular_ring(72, 0.3, 0.0);
+        let pedestal = to_mesh(&loft_solid(&[(&ring, 0.0), (&ring, 0.7)]));
+        let outline =
+            SupportOutline::measure(&pedestal, &Point2::origin(), 0.8, &ScanConfig::default())
+                .expect("the side below the hidden band bounds the contact");
+        assert_eq!(outline.seen_sectors(), 36);
+        for r in outline.radius_m.iter().flatten() {
+            assert!((r - 0.3).abs() < 1e-6, "{r}");
+        }
+        // Seen nowhere within the band (the side stops 0.2 m down), it bounds nothing.
+        let low = to_mesh(&loft_solid(&[(&ring, 0.0), (&ring, 0.6)]));
+        assert!(
+            SupportOutline::measure(&low, &Point2::origin(), 0.8, &ScanConfig::default()).is_none()
+        );
     }
 }
