@@ -357,6 +357,8 @@ pub struct SupportOutline {
     pub axis_xy: Point2<f64>,
     /// The edge's radius per sector, metres; `None` where no camera saw the support's side.
     pub radius_m: Vec<Option<f64>>,
+    /// The azimuth of the point at that radius, radians (the sector's middle where unseen).
+    pub azimuth_rad: Vec<f64>,
     /// The radius that bounds nothing, for [`OutlineGaps::Open`], metres.
     pub open_radius_m: f64,
 }
@@ -382,8 +384,8 @@ impl SupportOutline {
     ) -> Option<Self> {
         let sectors = config.profile_sectors;
         let slabs = ((SUPPORT_BAND_M.1 - SUPPORT_BAND_M.0) / PROFILE_SLAB_M).round() as usize;
-        // `highest[sector]`: (slab index from the top, largest radius in it).
-        let mut highest: Vec<Option<(usize, f64)>> = vec![None; sectors];
+        // `highest[sector]`: (slab index from the top, largest radius in it, its azimuth).
+        let mut highest: Vec<Option<(usize, f64, f64)>> = vec![None; sectors];
         for p in &mesh.positions {
             let depth = plane_z - f64::from(p.z) - SUPPORT_BAND_M.0;
             let xy = Point2::new(f64::from(p.x), f64::from(p.y));
@@ -396,15 +398,20 @@ impl SupportOutline {
                 continue;
             }
             let entry = &mut highest[sector_of(&xy, axis_xy, sectors)];
+            let azimuth = (xy.y - axis_xy.y).atan2(xy.x - axis_xy.x);
             *entry = match *entry {
-                Some((j, best)) if j < k => Some((j, best)),
-                Some((j, best)) if j == k => Some((j, best.max(r))),
-                _ => Some((k, r)),
+                Some((j, best, a)) if j < k || (j == k && best >= r) => Some((j, best, a)),
+                _ => Some((k, r, azimuth)),
             };
         }
         let outline = Self {
             axis_xy: *axis_xy,
-            radius_m: highest.iter().map(|h| h.map(|(_, r)| r)).collect(),
+            radius_m: highest.iter().map(|h| h.map(|(_, r, _)| r)).collect(),
+            azimuth_rad: highest
+                .iter()
+                .enumerate()
+                .map(|(s, h)| h.map_or_else(|| sector_middle_rad(s, sectors), |(_, _, a)| a))
+                .collect(),
             open_radius_m: config.support_radius_m,
         };
         (outline.seen_sectors() >= MIN_OUTLINE_SECTORS).then_some(outline)
@@ -445,12 +452,11 @@ impl SupportOutline {
     /// The outline as a convex polygon (xy metres, counter-clockwise), the unseen sectors
     /// filled as `gaps` says; `None` when it has no area.
     pub fn hull(&self, gaps: OutlineGaps) -> Option<Vec<Point2<f64>>> {
-        let n = self.radius_m.len();
         let points: Vec<Point2<f64>> = self
             .filled_radii(gaps)
             .into_iter()
-            .enumerate()
-            .map(|(s, r)| sector_point(&self.axis_xy, s, n, r))
+            .zip(&self.azimuth_rad)
+            .map(|(r, a)| self.axis_xy + r * nalgebra::Vector2::new(a.cos(), a.sin()))
             .collect();
         let hull = convex_hull_2d(&points);
         (hull.len() >= 3 && polygon_signed_area(&hull) > 0.0).then_some(hull)
@@ -460,15 +466,9 @@ impl SupportOutline {
 /// A support outline seen in fewer sectors than this is not interpolated: it bounds nothing.
 const MIN_OUTLINE_SECTORS: usize = 3;
 
-/// The point `radius_m` from `axis_xy` along the middle of sector `sector` of `sectors`.
-fn sector_point(
-    axis_xy: &Point2<f64>,
-    sector: usize,
-    sectors: usize,
-    radius_m: f64,
-) -> Point2<f64> {
-    let azimuth = (sector as f64 + 0.5) / sectors as f64 * std::f64::consts::TAU;
-    axis_xy + radius_m * nalgebra::Vector2::new(azimuth.cos(), azimuth.sin())
+/// The azimuth of the middle of sector `sector` of `sectors`, radians.
+fn sector_middle_rad(sector: usize, sectors: usize) -> f64 {
+    (sector as f64 + 0.5) / sectors as f64 * std::f64::consts::TAU
 }
 
 /// `hull` clipped by `outline` (its unseen sectors filled as `gaps` says) where they overlap,
@@ -565,6 +565,8 @@ pub struct BasalProfile {
     pub plane_z: f64,
     /// `radius_m[sector][slab]`: the largest radius seen, metres (0 where nothing was seen).
     pub radius_m: Vec<Vec<f64>>,
+    /// `azimuth_rad[sector][slab]`: the azimuth of the point at that radius, radians.
+    pub azimuth_rad: Vec<Vec<f64>>,
     /// Height of each slab's top above the plane, metres.
     pub slab_top_m: Vec<f64>,
 }
@@ -609,9 +611,14 @@ impl BasalProfile {
             all.iter().fold(Point2::origin(), |acc, p| acc + p.coords) / all.len() as f64
         });
         let mut radius_m = vec![vec![0.0f64; slabs]; sectors];
+        let mut azimuth_rad = vec![vec![0.0f64; slabs]; sectors];
         for (p, k) in &profile_points {
             let s = sector_of(p, &axis_xy, sectors);
-            radius_m[s][*k] = radius_m[s][*k].max((p - axis_xy).norm());
+            let d = p - axis_xy;
+            if d.norm() > radius_m[s][*k] {
+                radius_m[s][*k] = d.norm();
+                azimuth_rad[s][*k] = d.y.atan2(d.x);
+            }
         }
         let near_slabs = ((config.profile_near_m - config.profile_first_m) / PROFILE_SLAB_M).round()
             as usize
@@ -635,14 +642,15 @@ impl BasalProfile {
             axis_xy,
             plane_z,
             radius_m,
+            azimuth_rad,
             slab_top_m,
         })
     }
 
     /// The contact polygon under `hypothesis`: in each sector, the radius fitted over the
-    /// chosen slabs and evaluated at the hypothesised plane (never wider than the lowest slab
-    /// fitted); the convex hull, counter-clockwise, xy metres, at height
-    /// `plane_z + plane_offset_m`.
+    /// chosen slabs and evaluated at the hypothesised plane (never wider than the narrowest
+    /// slab fitted), along the azimuth where that slab reached its radius; the convex hull,
+    /// counter-clockwise, xy metres, at height `plane_z + plane_offset_m`.
     ///
     /// # Errors
     /// [`FragilityError::Degenerate`] when fewer than three sectors have enough slabs.
@@ -652,26 +660,39 @@ impl BasalProfile {
     ) -> Result<Vec<Point2<f64>>, FragilityError> {
         let sectors = self.radius_m.len();
         let mut contact = Vec::with_capacity(sectors);
-        for (s, by_slab) in self.radius_m.iter().enumerate() {
-            let measured: Vec<(f64, f64)> = by_slab
+        for (by_slab, azimuths) in self.radius_m.iter().zip(&self.azimuth_rad) {
+            // (slab top, radius, azimuth) of the slabs fitted.
+            let window: Vec<(f64, f64, f64)> = by_slab
                 .iter()
                 .zip(&self.slab_top_m)
-                .filter(|(r, _)| **r > 0.0)
+                .zip(azimuths)
+                .filter(|((r, _), _)| **r > 0.0)
                 .skip(hypothesis.skip_slabs)
                 .take(hypothesis.fit_slabs)
-                .map(|(r, top)| match hypothesis.model {
-                    ProfileModel::SquaredRadius => (*top, r.powi(2)),
-                    ProfileModel::Radius => (*top, *r),
-                })
+                .map(|((r, top), azimuth)| (*top, *r, *azimuth))
                 .collect();
-            if measured.len() < 3 {
+            if window.len() < 3 {
                 continue;
             }
+            let measured: Vec<(f64, f64)> = window
+                .iter()
+                .map(|&(top, r, _)| match hypothesis.model {
+                    ProfileModel::SquaredRadius => (top, r.powi(2)),
+                    ProfileModel::Radius => (top, r),
+                })
+                .collect();
             // The narrowest slab of the window caps the contact: a lowest slab wider than
             // those above it is the TSDF filling the wedge's tip (the double rock's lowest
-            // slab read 0.48 m where the rock is 0.21 m across), or a foot whose flare the
-            // cap only makes the estimate err towards the unsafe side's opposite.
-            let narrowest = measured.iter().map(|m| m.1).fold(f64::INFINITY, f64::min);
+            // slab read 0.48 m where the rock is 0.21 m across), or a flaring foot, which the
+            // cap underestimates (the safe side).
+            let (narrowest, azimuth) = window
+                .iter()
+                .zip(&measured)
+                .map(|(&(_, _, azimuth), &(_, value))| (value, azimuth))
+                .fold(
+                    (f64::INFINITY, 0.0),
+                    |best, m| if m.0 < best.0 { m } else { best },
+                );
             let at_plane = match line_fit(&measured) {
                 Some((a, b)) if b > 0.0 => {
                     (a + b * hypothesis.plane_offset_m).clamp(0.0, narrowest)
@@ -682,7 +703,11 @@ impl BasalProfile {
                 ProfileModel::SquaredRadius => at_plane.sqrt(),
                 ProfileModel::Radius => at_plane,
             };
-            contact.push(sector_point(&self.axis_xy, s, sectors, r0));
+            // Along the azimuth the slab reached its radius, not the sector's middle: a 10°
+            // sector's middle moves the far end of an elongated base sideways by up to 9% of
+            // its radius (5 cm on a slab standing on edge, 0.6 m long, whose α_min is across
+            // its 0.22 m thickness).
+            contact.push(self.axis_xy + r0 * nalgebra::Vector2::new(azimuth.cos(), azimuth.sin()));
         }
         let hull = convex_hull_2d(&contact);
         if hull.len() < 3 || polygon_signed_area(&hull).abs() <= 0.0 {
@@ -1391,6 +1416,7 @@ mod tests {
         SupportOutline {
             axis_xy: Point2::origin(),
             radius_m: (0..36).map(|s| (s < seen).then_some(0.3)).collect(),
+            azimuth_rad: (0..36).map(|s| sector_middle_rad(s, 36)).collect(),
             open_radius_m: 1.0,
         }
     }

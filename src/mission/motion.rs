@@ -155,13 +155,24 @@ impl MotionSystem {
             acceleration_mps2: now.acceleration_mps2,
             yaw_rate_radps: now.yaw_rate_radps,
         };
-        let (trajectory, _clearance, _repairs) = plan_clear_trajectory(
-            &Path::new(all),
-            &start,
-            &planning.min_snap,
-            env,
-            &planning.clearance,
-        )?;
+        let path = Path::new(all);
+        let plan = |start: &StartState| {
+            plan_clear_trajectory(&path, start, &planning.min_snap, env, &planning.clearance)
+        };
+        let (trajectory, _clearance, _repairs) = match plan(&start) {
+            Ok(planned) => planned,
+            // A smooth way out of a moving start can swing wide of the straight path, and
+            // inserted waypoints cannot pull in what the momentum carries (library-b, seed 3:
+            // a mapping flight ended mid-ring at 1 m/s, and the climb back to the search arced
+            // 2.9 m out towards a slope, 1.18 m from it, which ended the mission). Braking and
+            // leaving from rest keeps to the straight path, which was checked clear; the
+            // controller absorbs the step in the reference's velocity.
+            Err(moving) if start != StartState::default() => {
+                tracing::warn!("{moving}; braking to leave from rest");
+                plan(&StartState::default())?
+            }
+            Err(e) => return Err(e),
+        };
         let end = trajectory.sample(trajectory.duration_s());
         self.hold = FlatState::hover(end.position_m, end.yaw_rad);
         self.active = Some(ActiveTrajectory {
@@ -205,6 +216,8 @@ impl MotionSystem {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use scarp_planning::minsnap::plan_min_snap;
+    use scarp_planning::terrain::Obstacle;
 
     #[test]
     fn flies_a_path_and_holds_its_end() {
@@ -233,5 +246,66 @@ mod tests {
         motion.advance_to(15.0, &drift).unwrap();
         let p = motion.state().position_m;
         assert!((p - (start - drift)).norm() < 0.05, "settled at {p}");
+    }
+
+    #[test]
+    fn a_way_out_that_momentum_would_swing_into_a_wall_is_flown_from_rest() {
+        // Cruising along +x, told to climb straight up: a smooth climb from that speed carries
+        // on along +x. With a wall placed where that swing would pass within the clearance
+        // (but the straight climb would not), and no waypoint allowed to pull the swing in
+        // (as on a leg too short to split), the vehicle brakes and climbs from rest.
+        let mut planning = PlanningConfig::default();
+        planning.clearance.max_inserted_waypoints = 0;
+        let mut motion =
+            MotionSystem::new(&planning.flight, Point3::new(0.0, 0.0, 10.0), 0.0).unwrap();
+        let far = Waypoint::new(Point3::new(60.0, 0.0, 10.0), 0.0);
+        motion
+            .follow(&[far], &Environment::empty(), &planning)
+            .unwrap();
+        let cruise_s = 0.5 * motion.remaining_s();
+        motion.advance_to(cruise_s, &Vector3::zeros()).unwrap();
+        let here = motion.state().position_m;
+        let moving = StartState {
+            velocity_mps: motion.state().velocity_mps,
+            ..StartState::default()
+        };
+        let up = Waypoint::new(Point3::new(here.x, here.y, 25.0), 0.0);
+        let path = Path::new(vec![Waypoint::new(here, 0.0), up]);
+        let swing = plan_min_snap(&path, &moving, &planning.min_snap).unwrap();
+        let steps = 200;
+        let excursion_m = (0..=steps)
+            .map(|k| swing.sample(swing.duration_s() * f64::from(k) / f64::from(steps)))
+            .map(|s| s.position_m.x - here.x)
+            .fold(0.0f64, f64::max);
+        let clearance_m = planning.clearance.min_clearance_m;
+        assert!(
+            excursion_m > clearance_m + 1.0,
+            "swings only {excursion_m} m"
+        );
+        // The wall's face lies 0.5 m short of the swing's farthest point.
+        let face_x_m = here.x + excursion_m - 0.5;
+        let wall = Obstacle::Cylinder {
+            center_x_m: face_x_m + 3.0,
+            center_y_m: here.y,
+            radius_m: 3.0,
+            z_bottom_m: 0.0,
+            z_top_m: 40.0,
+        };
+        let env = Environment::new(None, &[wall]).unwrap();
+        assert!(
+            plan_clear_trajectory(
+                &path,
+                &moving,
+                &planning.min_snap,
+                &env,
+                &planning.clearance
+            )
+            .is_err(),
+            "the case must need the fallback"
+        );
+        motion.follow(&[up], &env, &planning).unwrap();
+        let end = motion.time_s() + motion.remaining_s() + 3.0;
+        motion.advance_to(end, &Vector3::zeros()).unwrap();
+        assert!((motion.state().position_m - up.position_m).norm() < 0.2);
     }
 }
