@@ -61,7 +61,11 @@ pub fn render(report: &CampaignReport) -> String {
     }
 
     let _ = writeln!(md, "\n## Totals\n\n| must-show | result |\n|---|---|");
-    let rows: [(String, String); 14] = [
+    let rows: [(String, String); 15] = [
+        (
+            "runs that completed the mission (not ended by an error or a crash)".into(),
+            rate(&t.runs_completed),
+        ),
         (
             "runs without a collision".into(),
             rate(&t.runs_without_collision),
@@ -280,6 +284,22 @@ fn worst_cases(md: &mut String, report: &CampaignReport) {
             r.collisions.unwrap_or(0),
             r.run_dir
         );
+    }
+    let ended_early: Vec<_> = report
+        .runs
+        .iter()
+        .filter(|r| r.state == RunState::Finished && r.end_reason.as_deref() != Some("complete"))
+        .collect();
+    if !ended_early.is_empty() {
+        let _ = writeln!(md, "\nRuns that ended before completing the mission:\n");
+        for r in ended_early {
+            let _ = writeln!(
+                md,
+                "- `{}`: {}",
+                r.run_dir,
+                r.end_reason.as_deref().unwrap_or("no end reason")
+            );
+        }
     }
     let failed: Vec<_> = report
         .runs

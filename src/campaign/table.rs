@@ -122,7 +122,7 @@ pub struct TargetRow {
 }
 
 /// `count` of `of`, and their ratio (`None` when `of` is 0).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct Rate {
     /// How many met it.
     pub count: usize,
@@ -172,6 +172,10 @@ pub struct Totals {
     pub runs_finished: usize,
     /// Runs that failed, were interrupted, or have not run.
     pub runs_unfinished: usize,
+    /// Finished runs whose mission ran to its end (`end_reason` `complete`), not stopped by an
+    /// error (a leg that could not be planned) or a crash.
+    #[serde(default)]
+    pub runs_completed: Rate,
     /// Finished runs with no collision.
     pub runs_without_collision: Rate,
     /// Camera steps in collision, summed over the runs.
@@ -531,6 +535,13 @@ pub fn totals(runs: &[RunRow], targets: &[TargetRow]) -> Totals {
         runs: runs.len(),
         runs_finished: finished.len(),
         runs_unfinished: runs.len() - finished.len(),
+        runs_completed: Rate::new(
+            finished
+                .iter()
+                .filter(|r| r.end_reason.as_deref() == Some("complete"))
+                .count(),
+            finished.len(),
+        ),
         runs_without_collision: Rate::new(
             finished.iter().filter(|r| r.collisions == Some(0)).count(),
             finished.len(),
@@ -658,6 +669,12 @@ mod tests {
             .collect();
         fake_run(dir.path(), &runs[0], 1.0, 0);
         fake_run(dir.path(), &runs[1], 3.5, 12);
+        // Seed 1 finished, but a leg it could not plan ended its mission early.
+        let early = dir.path().join(runs[1].dir()).join("mission.json");
+        let mut mission: Value =
+            serde_json::from_str(&std::fs::read_to_string(&early).unwrap()).unwrap();
+        mission["end_reason"] = json!("error: no clear way out");
+        std::fs::write(&early, mission.to_string()).unwrap();
         // Seed 2 failed: its folder and world exist, its mission.json does not.
         fake_run(dir.path(), &runs[2], 0.0, 0);
         let failed = dir.path().join(runs[2].dir());
@@ -712,6 +729,7 @@ mod tests {
 
         let t = totals(&run_rows, &rows);
         assert_eq!((t.runs, t.runs_finished, t.runs_unfinished), (5, 2, 3));
+        assert_eq!(t.runs_completed, Rate::new(1, 2));
         assert_eq!(t.runs_without_collision, Rate::new(1, 2));
         assert_eq!(t.collisions_total, 12);
         assert_eq!(
