@@ -42,8 +42,9 @@
 //!    edge), so it is never above the smallest sampled α.
 //! 6. A 95% interval, `alpha_min_low_deg` to `alpha_min_high_deg` ([`AlphaInterval`]): for a
 //!    closed rock, the perturbation study's range; for a scan ([`scan::analyze_scan`]), the span
-//!    of 36 readings of the extrapolated contact, widened by the perturbation spread and by
-//!    margins set on a campaign of simulated flights.
+//!    of the readings of the extrapolated contact (36, and as many again where the support's
+//!    edge was not seen all round; each also shrunk by two voxels), widened by the perturbation
+//!    spread and by margins set on three campaigns' flights.
 //!
 //! ```
 //! use nalgebra::Point3;

@@ -1085,11 +1085,14 @@ pub fn analyze_scan(
 }
 
 /// The fragility of a scan closed by [`close_scan`]: [`analyze_detailed`] on the contact
-/// reading whose α_min is the median of [`ContactHypothesis::ensemble`]'s 36 readings (the
-/// plane moved by ±1.96 σ of [`super::UncertaintyConfig::contact_height_sigma_m`]); no single
-/// profile model or fit window holds for every shape of base. The α_min interval spans the
-/// readings, widened by the mesh-noise spread of the perturbation study and by
-/// [`ScanConfig::interval_relative_margin`] and [`ScanConfig::interval_margin_deg`].
+/// reading whose α_min is the median of [`ContactHypothesis::ensemble`]'s 36 readings with the
+/// support outline's unseen sectors interpolated (the plane moved by ±1.96 σ of
+/// [`super::UncertaintyConfig::contact_height_sigma_m`]); no single profile model or fit
+/// window holds for every shape of base. The α_min interval spans those readings, the same
+/// with the outline's unseen sectors open ([`OutlineGaps::Open`]), and each of them with its
+/// contact shrunk by [`ScanConfig::contact_edge_m`]; then it is widened by the mesh-noise
+/// spread of the perturbation study and by [`ScanConfig::interval_relative_margin`] and
+/// [`ScanConfig::interval_margin_deg`].
 ///
 /// # Errors
 /// Those of [`analyze_detailed`]; a centre of mass outside the extrapolated contact is a
