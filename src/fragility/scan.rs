@@ -347,8 +347,8 @@ fn support_plane_height(
 }
 
 /// The edge of the support's top seen around a rock: per azimuth sector around the basal
-/// profile's axis, the largest radius of the scan's surface in the highest slab measured from
-/// [`SUPPORT_BAND_M`] below the support plane, up to `support_radius_m`. Seen from the side,
+/// profile's axis, the largest radius of the scan's surface in the highest slab seen from 1.5
+/// to 15 cm below the support plane, up to `support_radius_m`. Seen from the side,
 /// this is the pedestal's edge where the rock's overhang hides the pedestal's top. The contact
 /// cannot reach beyond it.
 #[derive(Debug, Clone, PartialEq)]
