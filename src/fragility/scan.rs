@@ -98,6 +98,11 @@ pub struct ScanConfig {
     /// A base that hangs a few millimetres over its support (the double rock's near-flush
     /// base) is contact to 1 cm voxels but not to the rock. Default 0.02 (two voxels).
     pub contact_edge_m: f64,
+    /// A scan is refused when opening the support outline's unseen sectors raises the median
+    /// α_min reading by more than this, degrees: the unseen edge then decides α_min. Default
+    /// 5: the squat block of library-b (a flat base on a narrower pedestal seen on one side,
+    /// seed 11) read 27.7° against a truth of 17.5° with the edge interpolated.
+    pub max_unseen_support_effect_deg: f64,
     /// Of 12 sectors around the rock's axis, how many an upward-facing ring must fill to be the
     /// support's top. Default 7: the rock's overhang hides the top on some sides.
     pub support_min_sectors: usize,
@@ -127,6 +132,7 @@ impl Default for ScanConfig {
             max_filled_fraction: 0.4,
             interval_margin_deg: 1.0,
             contact_edge_m: 0.02,
+            max_unseen_support_effect_deg: 5.0,
         }
     }
 }
@@ -153,6 +159,10 @@ impl ScanConfig {
             ("scan.profile_near_m", self.profile_near_m),
             ("scan.interval_margin_deg", self.interval_margin_deg),
             ("scan.contact_edge_m", self.contact_edge_m),
+            (
+                "scan.max_unseen_support_effect_deg",
+                self.max_unseen_support_effect_deg,
+            ),
             (
                 "scan.interval_relative_margin",
                 self.interval_relative_margin,
@@ -1148,6 +1158,33 @@ pub fn analyze_closed_scan(
         .get(interpolated.len().saturating_sub(1) / 2)
         .copied()
         .unwrap_or(&closed.contact_polygon);
+    // Where the support's unseen edge decides α_min (a flat base over a support seen on one
+    // side only), interpolating it is a guess that the readings cannot bound from below.
+    let median_alpha = |gaps: OutlineGaps| {
+        let alphas: Vec<f64> = readings
+            .iter()
+            .filter(|(_, _, g)| *g == gaps)
+            .map(|(a, _, _)| *a)
+            .collect();
+        alphas.get(alphas.len().saturating_sub(1) / 2).copied()
+    };
+    if let (Some(bounded), Some(open)) = (
+        median_alpha(OutlineGaps::Interpolated),
+        median_alpha(OutlineGaps::Open),
+    ) && open - bounded > config.scan.max_unseen_support_effect_deg
+    {
+        let seen = closed
+            .support_outline
+            .as_ref()
+            .map_or(0, SupportOutline::seen_sectors);
+        return Err(FragilityError::Degenerate(format!(
+            "the support's edge is seen in only {seen} of {} directions, and where it is not \
+             seen it decides α_min ({bounded:.1}° with it interpolated, {open:.1}° with it \
+             open): the contact of the rock's base on it is guessed (map the support's top \
+             from lower views)",
+            config.scan.profile_sectors
+        )));
+    }
     let mut analysis = analyse(median, config)?;
     let mut alphas: Vec<f64> = readings.iter().map(|(a, _, _)| *a).collect();
     // Shrinking a convex contact by δ brings every edge δ nearer the centre of mass, so α_min
