@@ -1528,4 +1528,43 @@ mod tests {
         // Shrunk past the centre of mass, the rock topples at once.
         assert_eq!(shrunk_contact_alpha_deg(alpha, 0.4, 0.3), 0.0);
     }
+
+    #[test]
+    fn a_contact_decided_by_an_unseen_support_edge_is_refused() {
+        // The wedge scan's contact is 0.22 m in radius. Its support's edge is now seen only in
+        // 3 of 36 directions, 0.1 m out: interpolated, it bounds the contact to 0.1 m all
+        // round; open, it bounds almost nothing. α_min differs by ~10° between the two, so
+        // the unseen edge decides it.
+        let (scan, _) = wedge_scan();
+        let config = FragilityConfig::default();
+        let mut closed = close_scan(&scan, &config.scan).unwrap();
+        let sectors = config.scan.profile_sectors;
+        closed.support_outline = Some(SupportOutline {
+            axis_xy: closed.profile.axis_xy,
+            radius_m: (0..sectors).map(|s| (s < 3).then_some(0.1)).collect(),
+            azimuth_rad: (0..sectors)
+                .map(|s| sector_middle_rad(s, sectors))
+                .collect(),
+            open_radius_m: config.scan.support_radius_m,
+        });
+        let error = analyze_closed_scan(&closed, &config)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            error.contains("support's edge is seen in only 3 of 36"),
+            "{error}"
+        );
+        // Allowed to guess, it reads the interpolated edge, and its interval spans the open one.
+        let mut lenient = config.clone();
+        lenient.scan.max_unseen_support_effect_deg = 90.0;
+        let r = analyze_closed_scan(&closed, &lenient).unwrap().report;
+        let h = r.com_height_above_contact_m;
+        let interpolated_deg = (0.1f64).atan2(h).to_degrees();
+        assert!(
+            (r.alpha_min_deg - interpolated_deg).abs() < 1.0,
+            "{} vs {interpolated_deg}",
+            r.alpha_min_deg
+        );
+        assert!(r.alpha_min_high_deg > (0.2f64).atan2(h).to_degrees());
+    }
 }
