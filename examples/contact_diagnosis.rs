@@ -95,22 +95,17 @@ fn main() -> Result<()> {
             );
             let map_result = analyze_scan(&mesh, &config);
             if let Ok((closed, a)) = &map_result {
-                let readings: Vec<String> = scarp::fragility::scan::ContactHypothesis::ensemble(
-                    1.96 * config.uncertainty.contact_height_sigma_m,
-                    closed
-                        .support_outline
-                        .as_ref()
-                        .is_some_and(|o| o.has_gaps()),
-                )
-                .iter()
-                .map(|h| {
-                    closed
-                        .contact_under(h)
-                        .ok()
-                        .and_then(|p| a.alpha_min_on_contact(&p))
-                        .map_or("nan".into(), |v| format!("{v:.3}"))
-                })
-                .collect();
+                let readings: Vec<String> = closed
+                    .hypotheses(1.96 * config.uncertainty.contact_height_sigma_m)
+                    .iter()
+                    .map(|h| {
+                        closed
+                            .contact_under(h)
+                            .ok()
+                            .and_then(|p| a.alpha_min_on_contact(&p))
+                            .map_or("nan".into(), |v| format!("{v:.3}"))
+                    })
+                    .collect();
                 println!(
                     "READINGS {} {:.3} {}",
                     label.replace(' ', "_"),

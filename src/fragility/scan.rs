@@ -304,8 +304,18 @@ fn sectors_filled(sectors: impl Iterator<Item = usize>) -> usize {
 
 /// The azimuth sector (of `sectors`) of `p` around `axis_xy`.
 fn sector_of(p: &Point2<f64>, axis_xy: &Point2<f64>, sectors: usize) -> usize {
+    sector_of_azimuth(azimuth_of(p, axis_xy), sectors)
+}
+
+/// The azimuth of `p` seen from `axis_xy`, radians in (−π, π].
+fn azimuth_of(p: &Point2<f64>, axis_xy: &Point2<f64>) -> f64 {
     let d = p - axis_xy;
-    let a = d.y.atan2(d.x).rem_euclid(std::f64::consts::TAU);
+    d.y.atan2(d.x)
+}
+
+/// The sector (of `sectors`) holding `azimuth_rad`.
+fn sector_of_azimuth(azimuth_rad: f64, sectors: usize) -> usize {
+    let a = azimuth_rad.rem_euclid(std::f64::consts::TAU);
     ((a / std::f64::consts::TAU * sectors as f64) as usize).min(sectors - 1)
 }
 
@@ -407,8 +417,8 @@ impl SupportOutline {
             if k >= slabs {
                 continue;
             }
-            let entry = &mut highest[sector_of(&xy, axis_xy, sectors)];
-            let azimuth = (xy.y - axis_xy.y).atan2(xy.x - axis_xy.x);
+            let azimuth = azimuth_of(&xy, axis_xy);
+            let entry = &mut highest[sector_of_azimuth(azimuth, sectors)];
             *entry = match *entry {
                 Some((j, best, a)) if j < k || (j == k && best >= r) => Some((j, best, a)),
                 _ => Some((k, r, azimuth)),
@@ -437,7 +447,8 @@ impl SupportOutline {
         self.seen_sectors() < self.radius_m.len()
     }
 
-    /// The edge's radius in every sector, the unseen ones filled as `gaps` says, metres.
+    /// The edge's radius in every sector, the unseen ones filled as `gaps` says, metres. With
+    /// no sector seen, nothing is interpolated: every sector is open.
     pub fn filled_radii(&self, gaps: OutlineGaps) -> Vec<f64> {
         let n = self.radius_m.len();
         let seen: Vec<usize> = (0..n).filter(|&s| self.radius_m[s].is_some()).collect();
@@ -445,6 +456,7 @@ impl SupportOutline {
             .map(|s| match (self.radius_m[s], gaps) {
                 (Some(r), _) => r,
                 (None, OutlineGaps::Open) => self.open_radius_m,
+                (None, OutlineGaps::Interpolated) if seen.is_empty() => self.open_radius_m,
                 (None, OutlineGaps::Interpolated) => {
                     // The nearest seen sectors before and after `s`, going round.
                     let after = seen.iter().map(|&t| (t + n - s) % n).min().unwrap_or(0);
@@ -623,11 +635,12 @@ impl BasalProfile {
         let mut radius_m = vec![vec![0.0f64; slabs]; sectors];
         let mut azimuth_rad = vec![vec![0.0f64; slabs]; sectors];
         for (p, k) in &profile_points {
-            let s = sector_of(p, &axis_xy, sectors);
-            let d = p - axis_xy;
-            if d.norm() > radius_m[s][*k] {
-                radius_m[s][*k] = d.norm();
-                azimuth_rad[s][*k] = d.y.atan2(d.x);
+            let azimuth = azimuth_of(p, &axis_xy);
+            let s = sector_of_azimuth(azimuth, sectors);
+            let r = (p - axis_xy).norm();
+            if r > radius_m[s][*k] {
+                radius_m[s][*k] = r;
+                azimuth_rad[s][*k] = azimuth;
             }
         }
         let near_slabs = ((config.profile_near_m - config.profile_first_m) / PROFILE_SLAB_M).round()
@@ -728,12 +741,6 @@ impl BasalProfile {
         }
         Ok(hull)
     }
-}
-
-/// Area of a horizontal polygon given as xyz points, m².
-fn polygon_area_3d(polygon: &[[f64; 3]]) -> f64 {
-    let xy: Vec<Point2<f64>> = polygon.iter().map(|p| Point2::new(p[0], p[1])).collect();
-    polygon_signed_area(&xy).abs()
 }
 
 /// α_min, degrees, of a centre of mass `com_height_m` above a convex contact on which its
@@ -1013,21 +1020,22 @@ pub fn close_scan(mesh: &TriangleMesh, config: &ScanConfig) -> Result<ClosedScan
         fit_slabs: config.profile_fit_slabs,
         ..ContactHypothesis::POINT_ESTIMATE
     };
-    let contact_polygon: Vec<[f64; 3]> = clipped_by(
+    let contact_xy = clipped_by(
         profile.contact(&point_estimate)?,
         support_outline.as_ref(),
         point_estimate.gaps,
-    )
-    .iter()
-    .map(|p| [p.x, p.y, contact_height_m])
-    .collect();
+    );
     tracing::debug!(
         neck_z,
         plane_z,
         support_outline_seen_sectors = support_outline.as_ref().map(SupportOutline::seen_sectors),
-        contact_area_m2 = polygon_area_3d(&contact_polygon),
+        contact_area_m2 = super::rocking::polygon_area(&contact_xy),
         "scan closed"
     );
+    let contact_polygon = contact_xy
+        .iter()
+        .map(|p| [p.x, p.y, contact_height_m])
+        .collect();
     let scanned_area_m2 = rock.surface_area();
     let loops_closed = fill_holes(&mut rock);
     let filled_area_m2 = rock.surface_area() - scanned_area_m2;
@@ -1055,6 +1063,16 @@ pub fn close_scan(mesh: &TriangleMesh, config: &ScanConfig) -> Result<ClosedScan
 }
 
 impl ClosedScan {
+    /// The contact readings of this scan ([`ContactHypothesis::ensemble`]), with the readings
+    /// of an open outline when the support's edge was not seen all round.
+    pub fn hypotheses(&self, plane_offset_m: f64) -> Vec<ContactHypothesis> {
+        let open_gaps = self
+            .support_outline
+            .as_ref()
+            .is_some_and(SupportOutline::has_gaps);
+        ContactHypothesis::ensemble(plane_offset_m, open_gaps)
+    }
+
     /// The contact polygon under `hypothesis`, clipped by the support's outline, world frame
     /// metres.
     ///
@@ -1132,12 +1150,7 @@ pub fn analyze_closed_scan(
     let mut unperturbed = config.clone();
     unperturbed.uncertainty.samples = 0;
     let first = analyse(&closed.contact_polygon, &unperturbed)?;
-    let open_gaps = closed
-        .support_outline
-        .as_ref()
-        .is_some_and(SupportOutline::has_gaps);
-    let hypotheses =
-        ContactHypothesis::ensemble(1.96 * config.uncertainty.contact_height_sigma_m, open_gaps);
+    let hypotheses = closed.hypotheses(1.96 * config.uncertainty.contact_height_sigma_m);
     // (α_min, polygon, gaps) of each reading; the centre of mass hardly moves with the plane's
     // millimetres, so the first analysis's serves them all.
     let mut readings: Vec<(f64, Vec<[f64; 3]>, OutlineGaps)> = hypotheses
@@ -1147,31 +1160,22 @@ pub fn analyze_closed_scan(
         .collect();
     // A stable sort, so ties keep the ensemble's order and the choice is deterministic.
     readings.sort_by(|a, b| a.0.total_cmp(&b.0));
+    // The median reading (α_min, polygon) with the outline's gaps filled as given.
+    let median_reading = |gaps: OutlineGaps| {
+        let of_gaps: Vec<&(f64, Vec<[f64; 3]>, OutlineGaps)> =
+            readings.iter().filter(|(_, _, g)| *g == gaps).collect();
+        of_gaps
+            .get(of_gaps.len().saturating_sub(1) / 2)
+            .map(|(alpha, polygon, _)| (*alpha, polygon))
+    };
     // The point estimate takes the support as smooth where it hides; the readings with its
     // unseen sectors unbounded only widen the interval.
-    let interpolated: Vec<&Vec<[f64; 3]>> = readings
-        .iter()
-        .filter(|(_, _, gaps)| *gaps == OutlineGaps::Interpolated)
-        .map(|(_, polygon, _)| polygon)
-        .collect();
-    let median = interpolated
-        .get(interpolated.len().saturating_sub(1) / 2)
-        .copied()
-        .unwrap_or(&closed.contact_polygon);
+    let interpolated = median_reading(OutlineGaps::Interpolated);
+    let median = interpolated.map_or(&closed.contact_polygon, |(_, polygon)| polygon);
     // Where the support's unseen edge decides α_min (a flat base over a support seen on one
     // side only), interpolating it is a guess that the readings cannot bound from below.
-    let median_alpha = |gaps: OutlineGaps| {
-        let alphas: Vec<f64> = readings
-            .iter()
-            .filter(|(_, _, g)| *g == gaps)
-            .map(|(a, _, _)| *a)
-            .collect();
-        alphas.get(alphas.len().saturating_sub(1) / 2).copied()
-    };
-    if let (Some(bounded), Some(open)) = (
-        median_alpha(OutlineGaps::Interpolated),
-        median_alpha(OutlineGaps::Open),
-    ) && open - bounded > config.scan.max_unseen_support_effect_deg
+    if let (Some((bounded, _)), Some((open, _))) = (interpolated, median_reading(OutlineGaps::Open))
+        && open - bounded > config.scan.max_unseen_support_effect_deg
     {
         let seen = closed
             .support_outline
@@ -1475,6 +1479,14 @@ mod tests {
         let open = outline.filled_radii(OutlineGaps::Open);
         assert_eq!(open.iter().filter(|&&r| r == 1.0).count(), 18);
         assert!(polygon_signed_area(&outline.hull(OutlineGaps::Open).unwrap()) > 3.0 * circle);
+    }
+
+    #[test]
+    fn an_outline_seen_nowhere_is_open_all_round_not_nan() {
+        let outline = half_seen_outline(0);
+        for gaps in [OutlineGaps::Interpolated, OutlineGaps::Open] {
+            assert!(outline.filled_radii(gaps).iter().all(|&r| r == 1.0));
+        }
     }
 
     #[test]
