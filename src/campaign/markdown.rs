@@ -288,7 +288,7 @@ fn worst_cases(md: &mut String, report: &CampaignReport) {
     let ended_early: Vec<_> = report
         .runs
         .iter()
-        .filter(|r| r.state == RunState::Finished && r.end_reason.as_deref() != Some("complete"))
+        .filter(|r| r.state == RunState::Finished && !r.completed_mission())
         .collect();
     if !ended_early.is_empty() {
         let _ = writeln!(md, "\nRuns that ended before completing the mission:\n");

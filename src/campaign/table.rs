@@ -75,6 +75,14 @@ pub struct RunRow {
     pub safety_events: Option<u64>,
 }
 
+impl RunRow {
+    /// Whether the run finished and its mission ran to its end (`end_reason` `complete`), not
+    /// stopped by an error or a crash.
+    pub fn completed_mission(&self) -> bool {
+        self.state == RunState::Finished && self.end_reason.as_deref() == Some("complete")
+    }
+}
+
 /// One true target of one run.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct TargetRow {
@@ -536,10 +544,7 @@ pub fn totals(runs: &[RunRow], targets: &[TargetRow]) -> Totals {
         runs_finished: finished.len(),
         runs_unfinished: runs.len() - finished.len(),
         runs_completed: Rate::new(
-            finished
-                .iter()
-                .filter(|r| r.end_reason.as_deref() == Some("complete"))
-                .count(),
+            finished.iter().filter(|r| r.completed_mission()).count(),
             finished.len(),
         ),
         runs_without_collision: Rate::new(

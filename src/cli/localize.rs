@@ -76,8 +76,9 @@ pub struct LocalizeArgs {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum DetectorKind {
-    /// [`crate::detection::simulated::SimulatedDetector`] with the mission's default configuration, seeded from `--seed`, on
-    /// the sequence's instance masks; the roles of the rocks come from `boxes.txt`.
+    /// [`crate::detection::simulated::SimulatedDetector`] with the mission's default
+    /// configuration, seeded from `--seed`, on the sequence's instance masks; the roles of the
+    /// rocks come from `boxes.txt`.
     Simulated,
     /// Perfect boxes of the target rocks from `boxes.txt`; the rock id is the track id.
     Groundtruth,
