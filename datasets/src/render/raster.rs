@@ -17,13 +17,86 @@ pub struct SetupTriangle {
     pub bbox: [u32; 4],
     /// Index of the source layer.
     pub layer: u16,
-    /// The unclipped face's corners in camera coordinates, metres.
-    pub corners: [Point3<f64>; 3],
-    /// The face's unnormalised normal (b − a) × (c − a), camera frame.
-    pub normal: Vector3<f64>,
-    /// Light (ambient + diffuse, in [0, 1]) at each corner, interpolated across the face
-    /// (Gouraud shading); set by the caller after setup.
-    pub corner_light: [f32; 3],
+    /// Depth and light at any pixel, from the unclipped face.
+    pub shading: Shading,
+}
+
+/// A face's depth and Gouraud light as closed-form functions of the pixel (u, v), set up once
+/// per face so that resolving a pixel costs a few multiply-adds instead of a ray–plane
+/// intersection and two cross products.
+///
+/// With the pixel's camera ray r(u, v) = ((u − cx)/fx, (v − cy)/fy, 1), which is affine in
+/// (u, v), and the face plane n·p = n·a (camera frame):
+/// - the exact z-depth is z = (n·a) / (n·r), and n·r is affine in (u, v);
+/// - the camera-frame point is p = z·r, and the barycentric weights of p are affine in p, so
+///   the interpolated light is L₀ + z·(g·r) with g·r affine in (u, v).
+#[derive(Debug, Clone, Copy)]
+pub struct Shading {
+    /// n·a, the plane's offset along its (unnormalised) normal, camera frame.
+    plane_offset: f64,
+    /// n·r(u, v) = c₀ + c₁·u + c₂·v.
+    depth_denominator: [f64; 3],
+    /// The light's constant part L₀.
+    light_offset: f64,
+    /// g·r(u, v) = c₀ + c₁·u + c₂·v.
+    light_gradient: [f64; 3],
+}
+
+/// The coefficients of w·r(u, v) as c₀ + c₁·u + c₂·v, for a camera-frame vector w.
+fn along_ray(camera: &PinholeCamera, w: &Vector3<f64>) -> [f64; 3] {
+    [
+        w.z - w.x * camera.cx / camera.fx - w.y * camera.cy / camera.fy,
+        w.x / camera.fx,
+        w.y / camera.fy,
+    ]
+}
+
+fn affine(c: &[f64; 3], u: f64, v: f64) -> f64 {
+    c[0] + c[1] * u + c[2] * v
+}
+
+impl Shading {
+    /// Sets up a face with camera-frame `corners`, their unnormalised normal
+    /// (b − a) × (c − a), and the light (ambient + diffuse, in [0, 1]) at each corner.
+    pub fn new(
+        camera: &PinholeCamera,
+        corners: &[Point3<f64>; 3],
+        normal: &Vector3<f64>,
+        corner_light: [f32; 3],
+    ) -> Self {
+        let [a, b, c] = corners;
+        let area2 = normal.norm_squared().max(1e-30);
+        // Barycentric weight of a at p: ((b − p) × (c − p))·n / |n|²
+        //   = ((b × c)·n + p·(n × (c − b))) / |n|², and likewise for b.
+        let weight_a = (
+            b.coords.cross(&c.coords).dot(normal),
+            normal.cross(&(c - b)),
+        );
+        let weight_b = (
+            c.coords.cross(&a.coords).dot(normal),
+            normal.cross(&(a - c)),
+        );
+        let [l_a, l_b, l_c] = corner_light.map(f64::from);
+        let (d_a, d_b) = (l_a - l_c, l_b - l_c);
+        Self {
+            plane_offset: normal.dot(&a.coords),
+            depth_denominator: along_ray(camera, normal),
+            light_offset: l_c + (d_a * weight_a.0 + d_b * weight_b.0) / area2,
+            light_gradient: along_ray(camera, &((weight_a.1 * d_a + weight_b.1 * d_b) / area2)),
+        }
+    }
+
+    /// The exact z-depth (metres) of the face at pixel (u, v), or `None` when the pixel's ray
+    /// grazes the plane.
+    pub fn depth_m(&self, u: f64, v: f64) -> Option<f64> {
+        let denominator = affine(&self.depth_denominator, u, v);
+        (denominator.abs() > 1e-12).then(|| self.plane_offset / denominator)
+    }
+
+    /// The interpolated light at pixel (u, v), whose depth is `depth_m`.
+    pub fn light(&self, u: f64, v: f64, depth_m: f64) -> f32 {
+        (self.light_offset + depth_m * affine(&self.light_gradient, u, v)) as f32
+    }
 }
 
 /// A face clipped against the near plane: up to 4 corners (a triangle loses one corner and
@@ -42,11 +115,14 @@ impl ClippedPolygon {
 
 /// Sets up one camera-space triangle: culls back faces (faces wound clockwise seen from the
 /// camera), clips against z = `near_m`, projects, and appends 0–2 screen triangles to `out`.
+/// `corner_light` gives the light at the corners; it is only called for a face that faces the
+/// camera.
 pub fn setup_triangle(
     camera: &PinholeCamera,
     corners: &[Point3<f64>; 3],
     layer: u16,
     near_m: f64,
+    corner_light: impl FnOnce() -> [f32; 3],
     out: &mut Vec<SetupTriangle>,
 ) {
     let [a, b, c] = corners;
@@ -76,6 +152,7 @@ pub fn setup_triangle(
         return;
     }
     let polygon = &polygon.corners[..polygon.len];
+    let (mut shading, mut corner_light) = (None, Some(corner_light));
     for k in 1..polygon.len() - 1 {
         let tri = [polygon[0], polygon[k], polygon[k + 1]];
         let mut screen = tri.map(|p| {
@@ -102,14 +179,18 @@ pub fn setup_triangle(
         if u0 > u1 || v0 > v1 {
             continue;
         }
+        // Both halves of a clipped face share the face's shading; built once, and only for
+        // a face that reaches the screen.
+        let shading = *shading.get_or_insert_with(|| {
+            let light = corner_light.take().map_or([1.0; 3], |light| light());
+            Shading::new(camera, corners, &normal, light)
+        });
         out.push(SetupTriangle {
             screen,
             inv_z,
             bbox: [u0 as u32, v0 as u32, u1 as u32, v1 as u32],
             layer,
-            corners: *corners,
-            normal,
-            corner_light: [1.0; 3],
+            shading,
         });
     }
 }
@@ -134,19 +215,36 @@ fn is_top_left(a: &[f64; 2], b: &[f64; 2]) -> bool {
     (dy == 0.0 && dx > 0.0) || dy < 0.0
 }
 
-/// Rasterizes the binned triangles of one tile whose top-left pixel is (`x0`, `y0`). Returns
-/// the winning triangle index (`u32::MAX` for none) and its 1/z per tile pixel, row-major with
-/// stride [`TILE_SIZE`]. Triangles are visited in index order and only a strictly nearer
-/// fragment replaces a stored one, so ties keep the earlier triangle.
+/// The winning triangle index (`u32::MAX` for none) and its 1/z for each pixel of one tile,
+/// row-major with stride [`TILE_SIZE`]; reused from tile to tile.
+pub struct TileBuffer {
+    pub winners: Vec<u32>,
+    pub inv_depth: Vec<f32>,
+}
+
+impl TileBuffer {
+    pub fn new() -> Self {
+        let n = (TILE_SIZE * TILE_SIZE) as usize;
+        Self {
+            winners: vec![u32::MAX; n],
+            inv_depth: vec![0.0; n],
+        }
+    }
+}
+
+/// Rasterizes the binned triangles of one tile whose top-left pixel is (`x0`, `y0`) into
+/// `tile`. Triangles are visited in index order and only a strictly nearer fragment replaces
+/// a stored one, so ties keep the earlier triangle.
 pub fn rasterize_tile(
     camera: &PinholeCamera,
     triangles: &[SetupTriangle],
     bin: &[u32],
-    x0: u32,
-    y0: u32,
-) -> (Vec<u32>, Vec<f32>) {
-    let n = (TILE_SIZE * TILE_SIZE) as usize;
-    let (mut winners, mut inv_depth) = (vec![u32::MAX; n], vec![0.0f32; n]);
+    (x0, y0): (u32, u32),
+    tile: &mut TileBuffer,
+) {
+    tile.winners.fill(u32::MAX);
+    tile.inv_depth.fill(0.0);
+    let TileBuffer { winners, inv_depth } = tile;
     let x_end = (x0 + TILE_SIZE).min(camera.width) - 1;
     let y_end = (y0 + TILE_SIZE).min(camera.height) - 1;
     for &index in bin {
@@ -192,5 +290,67 @@ pub fn rasterize_tile(
             }
         }
     }
-    (winners, inv_depth)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn camera() -> PinholeCamera {
+        PinholeCamera::from_hfov(640, 480, 80.0).unwrap()
+    }
+
+    proptest! {
+        /// At each corner's own pixel the closed-form shading returns that corner's depth and
+        /// light, and at the centroid's pixel the depth of the centroid and the mean light.
+        #[test]
+        fn shading_interpolates_the_corners(
+            xs in prop::array::uniform3(-2.0f64..2.0),
+            ys in prop::array::uniform3(-1.5f64..1.5),
+            zs in prop::array::uniform3(1.0f64..30.0),
+            lights in prop::array::uniform3(0.0f32..1.0),
+        ) {
+            let camera = camera();
+            let corners: [Point3<f64>; 3] = std::array::from_fn(|k| Point3::new(xs[k], ys[k], zs[k]));
+            let [a, b, c] = &corners;
+            let normal = (b - a).cross(&(c - a));
+            // Skip slivers and faces seen edge-on, whose plane a ray barely determines.
+            let edge_on = normal.normalize().dot(&a.coords.normalize()).abs();
+            prop_assume!(normal.norm() > 0.05 && edge_on > 0.1);
+            let shading = Shading::new(&camera, &corners, &normal, lights);
+            let pixel = |p: &Point3<f64>| {
+                (camera.fx * p.x / p.z + camera.cx, camera.fy * p.y / p.z + camera.cy)
+            };
+            for (p, light) in corners.iter().zip(lights) {
+                let (u, v) = pixel(p);
+                let z = shading.depth_m(u, v).unwrap();
+                prop_assert!((z - p.z).abs() < 1e-9 * p.z, "depth {z} vs {}", p.z);
+                prop_assert!((shading.light(u, v, z) - light).abs() < 1e-5);
+            }
+            let centroid = Point3::from((a.coords + b.coords + c.coords) / 3.0);
+            let (u, v) = pixel(&centroid);
+            let z = shading.depth_m(u, v).unwrap();
+            prop_assert!((z - centroid.z).abs() < 1e-9 * centroid.z);
+            let mean = lights.iter().sum::<f32>() / 3.0;
+            prop_assert!((shading.light(u, v, z) - mean).abs() < 1e-5);
+        }
+    }
+
+    #[test]
+    fn a_ray_parallel_to_the_plane_has_no_depth() {
+        let camera = camera();
+        // The plane x = 1 m, camera frame: rays through the principal column (u = cx) run
+        // parallel to it; the ray through u = cx + fx, direction (1, ·, 1), meets it at z = 1 m.
+        let corners = [
+            Point3::new(1.0, 0.0, 1.0),
+            Point3::new(1.0, 1.0, 2.0),
+            Point3::new(1.0, -1.0, 3.0),
+        ];
+        let normal = (corners[1] - corners[0]).cross(&(corners[2] - corners[0]));
+        let shading = Shading::new(&camera, &corners, &normal, [1.0; 3]);
+        assert_eq!(shading.depth_m(camera.cx, camera.cy), None);
+        let z = shading.depth_m(camera.cx + camera.fx, 17.0).unwrap();
+        assert!((z - 1.0).abs() < 1e-12, "{z}");
+    }
 }
