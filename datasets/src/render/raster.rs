@@ -218,7 +218,9 @@ fn is_top_left(a: &[f64; 2], b: &[f64; 2]) -> bool {
 /// The winning triangle index (`u32::MAX` for none) and its 1/z for each pixel of one tile,
 /// row-major with stride [`TILE_SIZE`]; reused from tile to tile.
 pub struct TileBuffer {
+    /// Index into the frame's setup triangles of the nearest fragment.
     pub winners: Vec<u32>,
+    /// That fragment's 1/z, 1/metres (0 where nothing was drawn).
     pub inv_depth: Vec<f32>,
 }
 
