@@ -23,7 +23,9 @@ use scarp_slam::{PinholeCamera, TriangleMesh};
 use crate::DatasetError;
 use crate::texture::rock_albedo;
 use crate::world::{PEDESTAL_INSTANCE_OFFSET, TERRAIN_INSTANCE_ID, World};
-use raster::{SetupTriangle, TILE_SIZE, TileBuffer, rasterize_tile, setup_triangle};
+use raster::{
+    SetupTriangle, TILE_SIZE, TileBuffer, affine, along_ray, rasterize_tile, setup_triangle,
+};
 
 /// Near clipping distance, metres.
 pub const NEAR_PLANE_M: f64 = 0.05;
@@ -373,14 +375,14 @@ struct BandOutput<'a> {
     instance: &'a mut [u16],
 }
 
-/// The world-frame geometry of the pixel rays of one view: the camera-frame ray
-/// ((u − cx)/fx, (v − cy)/fy, 1) rotated to the world is affine in (u, v), so the world point at
-/// z-depth z is `origin + z·(at_origin + u·per_u + v·per_v)`.
+/// The world-frame pixel rays of one view. The camera-frame ray r(u, v) is affine in (u, v)
+/// (see [`along_ray`]), so each world component of its direction, a row of the rotation dotted
+/// with r, is too; the world point at z-depth z is `origin + z·direction(u, v)`.
 struct ViewRays {
+    /// The camera centre, world frame, metres.
     origin: Vector3<f64>,
-    at_origin: Vector3<f64>,
-    per_u: Vector3<f64>,
-    per_v: Vector3<f64>,
+    /// Per world axis, the coefficients of the ray direction's component.
+    direction: [[f64; 3]; 3],
 }
 
 impl ViewRays {
@@ -388,14 +390,14 @@ impl ViewRays {
         let rotation = world_from_camera.rotation.to_rotation_matrix();
         Self {
             origin: world_from_camera.translation.vector,
-            at_origin: rotation * Vector3::new(-camera.cx / camera.fx, -camera.cy / camera.fy, 1.0),
-            per_u: rotation * Vector3::x() / camera.fx,
-            per_v: rotation * Vector3::y() / camera.fy,
+            direction: std::array::from_fn(|axis| {
+                along_ray(camera, &rotation.matrix().row(axis).transpose())
+            }),
         }
     }
 
     fn direction(&self, u: f64, v: f64) -> Vector3<f64> {
-        self.at_origin + self.per_u * u + self.per_v * v
+        Vector3::from(self.direction.map(|c| affine(&c, u, v)))
     }
 
     /// The world point at z-depth `depth_m` on pixel (u, v)'s ray.

@@ -42,8 +42,9 @@ pub struct Shading {
     light_gradient: [f64; 3],
 }
 
-/// The coefficients of w·r(u, v) as c₀ + c₁·u + c₂·v, for a camera-frame vector w.
-fn along_ray(camera: &PinholeCamera, w: &Vector3<f64>) -> [f64; 3] {
+/// The coefficients of w·r(u, v) as c₀ + c₁·u + c₂·v, for a camera-frame vector w and the
+/// pixel's camera ray r(u, v) = ((u − cx)/fx, (v − cy)/fy, 1).
+pub fn along_ray(camera: &PinholeCamera, w: &Vector3<f64>) -> [f64; 3] {
     [
         w.z - w.x * camera.cx / camera.fx - w.y * camera.cy / camera.fy,
         w.x / camera.fx,
@@ -51,7 +52,8 @@ fn along_ray(camera: &PinholeCamera, w: &Vector3<f64>) -> [f64; 3] {
     ]
 }
 
-fn affine(c: &[f64; 3], u: f64, v: f64) -> f64 {
+/// c₀ + c₁·u + c₂·v.
+pub fn affine(c: &[f64; 3], u: f64, v: f64) -> f64 {
     c[0] + c[1] * u + c[2] * v
 }
 
@@ -115,14 +117,14 @@ impl ClippedPolygon {
 
 /// Sets up one camera-space triangle: culls back faces (faces wound clockwise seen from the
 /// camera), clips against z = `near_m`, projects, and appends 0–2 screen triangles to `out`.
-/// `corner_light` gives the light at the corners; it is only called for a face that faces the
-/// camera.
+/// `corner_light` gives the light at the corners; it is called once for a face that reaches
+/// the screen, and not at all for the others.
 pub fn setup_triangle(
     camera: &PinholeCamera,
     corners: &[Point3<f64>; 3],
     layer: u16,
     near_m: f64,
-    corner_light: impl FnOnce() -> [f32; 3],
+    corner_light: impl Fn() -> [f32; 3],
     out: &mut Vec<SetupTriangle>,
 ) {
     let [a, b, c] = corners;
@@ -152,7 +154,7 @@ pub fn setup_triangle(
         return;
     }
     let polygon = &polygon.corners[..polygon.len];
-    let (mut shading, mut corner_light) = (None, Some(corner_light));
+    let mut shading = None;
     for k in 1..polygon.len() - 1 {
         let tri = [polygon[0], polygon[k], polygon[k + 1]];
         let mut screen = tri.map(|p| {
@@ -181,10 +183,8 @@ pub fn setup_triangle(
         }
         // Both halves of a clipped face share the face's shading; built once, and only for
         // a face that reaches the screen.
-        let shading = *shading.get_or_insert_with(|| {
-            let light = corner_light.take().map_or([1.0; 3], |light| light());
-            Shading::new(camera, corners, &normal, light)
-        });
+        let shading =
+            *shading.get_or_insert_with(|| Shading::new(camera, corners, &normal, corner_light()));
         out.push(SetupTriangle {
             screen,
             inv_z,
