@@ -243,28 +243,17 @@ fn worst_cases(md: &mut String, report: &CampaignReport) {
             r.rock_id
         );
     }
-    let unmapped: Vec<&TargetRow> = report
+    let unmapped = report
         .targets
         .iter()
         .filter(|r| {
             r.status != "mapped" || (r.alpha_min_deg.is_none() && r.alpha_min_gt_deg.is_some())
         })
-        .collect();
-    if !unmapped.is_empty() {
-        let _ = writeln!(md, "\nNot mapped, or not analysed:\n");
-        for r in unmapped {
-            let _ = writeln!(
-                md,
-                "- `{}` rock {}: {}{}",
-                r.run_dir,
-                r.rock_id,
-                r.status,
-                r.error
-                    .as_deref()
-                    .map_or(String::new(), |e| format!(" — {e}"))
-            );
-        }
-    }
+        .map(|r| {
+            let error = dash_suffix(r.error.as_deref());
+            format!("`{}` rock {}: {}{error}", r.run_dir, r.rock_id, r.status)
+        });
+    bullet_section(md, "Not mapped, or not analysed", unmapped);
     let mut by_clearance: Vec<_> = report
         .runs
         .iter()
@@ -285,41 +274,44 @@ fn worst_cases(md: &mut String, report: &CampaignReport) {
             r.run_dir
         );
     }
-    let ended_early: Vec<_> = report
+    let ended_early = report
         .runs
         .iter()
         .filter(|r| r.state == RunState::Finished && !r.completed_mission())
-        .collect();
-    if !ended_early.is_empty() {
-        let _ = writeln!(md, "\nRuns that ended before completing the mission:\n");
-        for r in ended_early {
-            let _ = writeln!(
-                md,
-                "- `{}`: {}",
-                r.run_dir,
-                r.end_reason.as_deref().unwrap_or("no end reason")
-            );
-        }
-    }
-    let failed: Vec<_> = report
+        .map(|r| {
+            let reason = r.end_reason.as_deref().unwrap_or("no end reason");
+            format!("`{}`: {reason}", r.run_dir)
+        });
+    bullet_section(
+        md,
+        "Runs that ended before completing the mission",
+        ended_early,
+    );
+    let unfinished = report
         .runs
         .iter()
         .filter(|r| r.state != RunState::Finished)
-        .collect();
-    if !failed.is_empty() {
-        let _ = writeln!(md, "\nUnfinished runs:\n");
-        for r in failed {
-            let _ = writeln!(
-                md,
-                "- `{}`: {:?}{}",
-                r.run_dir,
-                r.state,
-                r.error
-                    .as_deref()
-                    .map_or(String::new(), |e| format!(" — {e}"))
-            );
+        .map(|r| {
+            let error = dash_suffix(r.error.as_deref());
+            format!("`{}`: {:?}{error}", r.run_dir, r.state)
+        });
+    bullet_section(md, "Unfinished runs", unfinished);
+}
+
+/// Appends `title` and one bullet per item, or nothing when there are no items.
+fn bullet_section(md: &mut String, title: &str, items: impl Iterator<Item = String>) {
+    let mut items = items.peekable();
+    if items.peek().is_some() {
+        let _ = writeln!(md, "\n{title}:\n");
+        for item in items {
+            let _ = writeln!(md, "- {item}");
         }
     }
+}
+
+/// " — text", or nothing without a text.
+fn dash_suffix(text: Option<&str>) -> String {
+    text.map_or(String::new(), |t| format!(" — {t}"))
 }
 
 fn per_world(md: &mut String, report: &CampaignReport) {
@@ -357,5 +349,25 @@ fn per_world(md: &mut String, report: &CampaignReport) {
             rate(&t.runs_without_collision),
             num(wall, 0)
         );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_bullet_section_lists_its_items_and_is_absent_without_any() {
+        let mut md = String::new();
+        bullet_section(&mut md, "Unfinished runs", std::iter::empty());
+        assert_eq!(md, "");
+        let items = ["`runs/a`: Failed", "`runs/b`: Interrupted"].map(String::from);
+        bullet_section(&mut md, "Unfinished runs", items.into_iter());
+        assert_eq!(
+            md,
+            "\nUnfinished runs:\n\n- `runs/a`: Failed\n- `runs/b`: Interrupted\n"
+        );
+        assert_eq!(dash_suffix(Some("timed out")), " — timed out");
+        assert_eq!(dash_suffix(None), "");
     }
 }
