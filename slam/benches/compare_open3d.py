@@ -30,6 +30,7 @@ import argparse
 import json
 import statistics
 import time
+import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -61,12 +62,9 @@ def camera_from_world(tx, ty, tz, qx, qy, qz, qw):
 
 
 def parse_camera(path):
-    values = {}
-    for line in Path(path).read_text().splitlines():
-        if "=" in line and not line.startswith("#"):
-            key, value = line.split("=", 1)
-            values[key.strip()] = float(value)
-    return values
+    """camera.toml of a sequence (intrinsics, depth scale, and flags such as depth_registered)."""
+    with open(path, "rb") as file:
+        return tomllib.load(file)
 
 
 def main():
@@ -216,6 +214,7 @@ def compare_tsdf(args):
         device=device,
     )
     times_ms = []
+    active_blocks = []
     for i in range(n):
         d = o3d.t.io.read_image(str(seq / depth[i][1])).to(device)
         c = o3d.t.io.read_image(str(seq / rgb[i][1])).to(device)
@@ -234,6 +233,7 @@ def compare_tsdf(args):
             trunc_voxel_multiplier=4.0,
         )
         times_ms.append((time.perf_counter() - start) * 1e3)
+        active_blocks.append(int(blocks.shape[0]))
     start = time.perf_counter()
     mesh = vbg.extract_triangle_mesh(weight_threshold=args.weight_threshold)
     mesh_ms = (time.perf_counter() - start) * 1e3
@@ -245,6 +245,7 @@ def compare_tsdf(args):
         "mesh_ms": mesh_ms,
         "triangles": int(mesh.triangle.indices.shape[0]),
         "blocks": int(vbg.hashmap().size()),
+        "blocks_updated_median": statistics.median(active_blocks),
     }
 
 

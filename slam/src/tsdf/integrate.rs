@@ -8,7 +8,7 @@
 //! pixel: the hash map is only consulted once per distinct block. The sorted keys make the
 //! allocation order, and so the whole result, independent of the thread count.
 
-use nalgebra::{Isometry3, Matrix3, Vector3};
+use nalgebra::{Isometry3, Matrix3, Point3, Vector3};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use wide::f32x8;
@@ -124,7 +124,8 @@ pub(super) fn integrate(
         });
     }
     let mut scratch = std::mem::take(&mut volume.scratch);
-    touched_blocks(volume, &mut scratch, frame, camera, world_from_camera);
+    let window = PixelWindow::for_roi(&volume.config, camera, world_from_camera);
+    touched_blocks(volume, &mut scratch, frame, camera, world_from_camera, &window);
     // Look the touched blocks up in parallel (read-only), then allocate the missing ones with
     // enough support serially in key order, which keeps storage order independent of the
     // thread count.
@@ -179,13 +180,15 @@ pub(super) fn integrate(
 
 /// Fills `scratch.keys` with the packed keys (sorted, unique) of the blocks that the truncation
 /// band around the measured depths touches inside the ROI, each with the number of pixels
-/// whose band crosses it.
+/// whose band crosses it. Only the pixels of `window` are walked: it must hold every pixel
+/// whose band can reach a block of the ROI.
 fn touched_blocks(
     volume: &TsdfVolume,
     scratch: &mut Scratch,
     frame: &RgbdFrame,
     camera: &PinholeCamera,
     world_from_camera: &Isometry3<f64>,
+    window: &PixelWindow,
 ) {
     let config = &volume.config;
     let depth = &frame.depth_m;
@@ -206,10 +209,15 @@ fn touched_blocks(
     let origin = (transform.translation.add_scalar(0.5 * config.voxel_size_m)) * inv_block;
     let step_u = r.column(0) / fx;
     let width = depth.width() as usize;
-    let height = depth.height() as usize;
     let data = depth.as_slice();
-    let tiles = height.div_ceil(ALLOCATION_ROWS);
+    // A pixel's band [d − truncation, d + truncation] must reach the window's depth range.
+    let min_depth_m = config.min_depth_m.max(window.near_m - truncation);
+    let max_depth_m = config.max_depth_m.min(window.far_m + truncation);
+    let tiles = window.rows.len().div_ceil(ALLOCATION_ROWS);
     scratch.tiles.resize_with(tiles, Vec::new);
+    for keys in &mut scratch.tiles[tiles..] {
+        keys.clear();
+    }
     let in_roi = |b: BlockCoord| match &config.roi {
         None => true,
         Some(roi) => {
@@ -218,8 +226,7 @@ fn touched_blocks(
             roi.intersects_box(lo, hi)
         }
     };
-    scratch
-        .tiles
+    scratch.tiles[..tiles]
         .par_iter_mut()
         .enumerate()
         .for_each(|(tile, keys)| {
@@ -243,12 +250,15 @@ fn touched_blocks(
                 recent[slot] = if in_roi(b) { (key, 1) } else { (key, 0) };
                 slot = (slot + 1) % recent.len();
             };
-            for v in tile * ALLOCATION_ROWS..((tile + 1) * ALLOCATION_ROWS).min(height) {
+            let first_row = window.rows.start + tile * ALLOCATION_ROWS;
+            for v in first_row..(first_row + ALLOCATION_ROWS).min(window.rows.end) {
                 // Viewing ray of pixel (u, v) at unit camera depth, world axes, block units;
                 // stepped along the row.
-                let mut ray = r * Vector3::new(-cx / fx, (v as f32 - cy) / fy, 1.0);
-                for &d in &data[v * width..(v + 1) * width] {
-                    if d >= config.min_depth_m && d <= config.max_depth_m {
+                let u0 = window.columns.start as f32;
+                let mut ray = r * Vector3::new((u0 - cx) / fx, (v as f32 - cy) / fy, 1.0);
+                for &d in &data[v * width + window.columns.start..v * width + window.columns.end]
+                {
+                    if d >= min_depth_m && d <= max_depth_m {
                         let a = origin + ray * (d - truncation);
                         let b = origin + ray * (d + truncation);
                         walk_blocks(&a, &b, &mut visit);
@@ -264,6 +274,106 @@ fn touched_blocks(
         scratch.keys.extend_from_slice(tile);
     }
     merge_counts(&mut scratch.keys);
+}
+
+/// The pixels whose truncation band can reach a region: a rectangle of columns and rows, and
+/// the range of camera depths (metres along the optical axis) the region spans.
+#[derive(Debug, Clone, PartialEq)]
+struct PixelWindow {
+    columns: std::ops::Range<usize>,
+    rows: std::ops::Range<usize>,
+    near_m: f32,
+    far_m: f32,
+}
+
+impl PixelWindow {
+    /// The pixels whose bands can reach a block of `config`'s region of interest (every pixel
+    /// without one).
+    fn for_roi(
+        config: &super::TsdfConfig,
+        camera: &PinholeCamera,
+        world_from_camera: &Isometry3<f64>,
+    ) -> Self {
+        match &config.roi {
+            // A block meeting the region lies within its bounding box grown by a block; the
+            // extra voxel covers the f32 rounding of the band ends.
+            Some(roi) => Self::of_box(
+                roi.bounding_box(),
+                f64::from(config.block_size_m() + config.voxel_size_m),
+                camera,
+                world_from_camera,
+            ),
+            None => Self::full(camera),
+        }
+    }
+
+    /// Every pixel, every depth.
+    fn full(camera: &PinholeCamera) -> Self {
+        Self {
+            columns: 0..camera.width as usize,
+            rows: 0..camera.height as usize,
+            near_m: f32::NEG_INFINITY,
+            far_m: f32::INFINITY,
+        }
+    }
+
+    /// The pixels whose rays meet the axis-aligned box `(min, max)` (world metres) grown by
+    /// `margin_m` on every side, with one pixel to spare, and the box's camera depths. A box
+    /// reaching behind the camera's centre keeps every column and row (its projection is
+    /// unbounded); one wholly behind it leaves no pixel.
+    fn of_box(
+        (min, max): ([f64; 3], [f64; 3]),
+        margin_m: f64,
+        camera: &PinholeCamera,
+        world_from_camera: &Isometry3<f64>,
+    ) -> Self {
+        let camera_from_world = world_from_camera.inverse();
+        let corners = (0..8).map(|c| {
+            let pick = |a: usize| {
+                if c & (1 << a) == 0 {
+                    min[a] - margin_m
+                } else {
+                    max[a] + margin_m
+                }
+            };
+            camera_from_world * Point3::new(pick(0), pick(1), pick(2))
+        });
+        let mut window = Self::full(camera);
+        let (mut near, mut far) = (f64::INFINITY, f64::NEG_INFINITY);
+        let (mut u_lo, mut u_hi, mut v_lo, mut v_hi) = (
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+        );
+        let mut in_front = true;
+        for p in corners {
+            near = near.min(p.z);
+            far = far.max(p.z);
+            // Depth is linear in position, so the box's depths lie between its corners'; and
+            // with every corner in front the box's image lies in the hull of theirs.
+            match camera.project(&p) {
+                Some(q) => {
+                    (u_lo, u_hi) = (u_lo.min(q.x), u_hi.max(q.x));
+                    (v_lo, v_hi) = (v_lo.min(q.y), v_hi.max(q.y));
+                }
+                None => in_front = false,
+            }
+        }
+        window.near_m = near as f32;
+        window.far_m = far as f32;
+        if far <= 0.0 {
+            window.rows = 0..0;
+        } else if in_front {
+            let span = |lo: f64, hi: f64, size: u32| {
+                let clamp = |x: f64| x.clamp(0.0, f64::from(size)) as usize;
+                clamp(lo.floor() - 1.0)..clamp(hi.ceil() + 2.0)
+            };
+            window.columns = span(u_lo, u_hi, camera.width);
+            window.rows = span(v_lo, v_hi, camera.height);
+        }
+        window
+    }
 }
 
 /// Sorts `(key, count)` pairs by key and sums the counts of equal keys.
@@ -458,8 +568,8 @@ impl Kernel {
                 // Index of the top-left pixel of the 2×2 neighbourhood, computed in f32 (exact:
                 // image sizes stay far below 2^24 pixels) and clamped so that every lane's
                 // neighbourhood lies in the image.
-                let quad = (v - fv) * splat(w as f32) + (u - fu);
-                let quad = quad.fast_min(last_quad).fast_trunc_int().to_array();
+                let quad_f = ((v - fv) * splat(w as f32) + (u - fu)).fast_min(last_quad);
+                let quad = quad_f.fast_trunc_int().to_array();
                 // Pixel loads (a gather: one voxel at a time).
                 let (mut d00, mut d01, mut d10, mut d11) =
                     ([0.0f32; N], [0.0; N], [0.0; N], [0.0; N]);
@@ -512,29 +622,138 @@ impl Kernel {
                 let blended = t_old * (w_old * inv_sum) + t_obs * share;
                 *tsdf_row = observed.select(blended, t_old).to_array();
                 *weight_row = w_sum.fast_min(max_weight).to_array();
-                let share = share.to_array();
-                let (right, below) = (right.to_bitmask(), below.to_bitmask());
-                for x in 0..N {
-                    if mask & (1 << x) == 0 {
-                        continue;
-                    }
-                    let nearest = quad[x] as usize
-                        + ((right >> x) & 1) as usize
-                        + w * ((below >> x) & 1) as usize;
-                    let c_old = color[base + x];
-                    let c_obs = rgb.get(nearest).copied().unwrap_or(c_old);
-                    // Colour blends in 16-bit fixed point (the observation's share in units of
-                    // 2⁻¹⁶, rounded): integer multiply-adds instead of six int ↔ float
-                    // conversions, exact to well under one 8-bit level. The share is ≤ 1, so the
-                    // blend of two bytes stays ≤ 255.
-                    let b16 = ((share[x] * 65536.0 + 0.5) as u32).min(65536);
-                    let a16 = 65536 - b16;
-                    color[base + x] = [0, 1, 2].map(|k| {
-                        ((u32::from(c_old[k]) * a16 + u32::from(c_obs[k]) * b16 + 32768) >> 16)
-                            as u8
-                    });
+                // Colour blends in 16-bit fixed point: the observation's share in units of
+                // 2⁻¹⁶, rounded, then (old·(2¹⁶ − b) + new·b + 2¹⁵) >> 16 per channel. Every term
+                // is an integer below 2²⁴, so f32 lanes compute it exactly. Unobserved lanes have
+                // a share of 0 and keep their colour.
+                let b16 = floor_small(share * splat(65536.0) + half).fast_min(splat(65536.0));
+                let a16 = splat(65536.0) - b16;
+                // The pixel nearest to each projection (its 2×2 neighbourhood's corner on the
+                // projection's side).
+                let nearest = (quad_f
+                    + right.select(one, zero)
+                    + below.select(splat(w as f32), zero))
+                .fast_trunc_int()
+                .to_array();
+                let row_color: &mut [[u8; 3]; N] = (&mut color[base..base + N])
+                    .try_into()
+                    .expect("a block row holds eight voxels");
+                let observed_color = nearest.map(|i| rgb[i as usize]);
+                let blended = [0, 1, 2].map(|k| {
+                    let old = f32x8::new(row_color.map(|c| f32::from(c[k])));
+                    let new = f32x8::new(observed_color.map(|c| f32::from(c[k])));
+                    floor_small((old * a16 + new * b16 + splat(32768.0)) * splat(1.0 / 65536.0))
+                        .fast_trunc_int()
+                        .to_array()
+                });
+                for (x, c) in row_color.iter_mut().enumerate() {
+                    // Each blend of two bytes with shares summing to one stays within 0..=255.
+                    *c = [0, 1, 2].map(|k| blended[k][x] as u8);
                 }
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use nalgebra::Point3;
+    use proptest::prelude::*;
+
+    use super::*;
+    use crate::geometry::look_at;
+    use crate::image::{DepthImage, RgbImage};
+    use crate::tsdf::{Roi, TsdfConfig};
+
+    fn touched(
+        volume: &TsdfVolume,
+        frame: &RgbdFrame,
+        camera: &PinholeCamera,
+        pose: &Isometry3<f64>,
+        window: &PixelWindow,
+    ) -> Vec<(u64, u32)> {
+        let mut scratch = Scratch::default();
+        touched_blocks(volume, &mut scratch, frame, camera, pose, window);
+        scratch.keys
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(64))]
+
+        /// Walking only the ROI's pixel window finds the same blocks, with the same pixel
+        /// counts, as walking every pixel: the window drops no pixel whose band reaches the
+        /// region, whether the region lies ahead, to the side, around or behind the camera.
+        #[test]
+        fn the_roi_window_loses_no_block(
+            eye in (-2.5f64..2.5, -2.5f64..2.5, -1.0f64..2.5),
+            target in (-1.5f64..1.5, -1.5f64..1.5, -0.5f64..0.5),
+            radius_m in 0.05f64..1.0,
+            seed in any::<u64>(),
+        ) {
+            let eye = Point3::new(eye.0, eye.1, eye.2);
+            let target = Point3::new(target.0, target.1, target.2);
+            let range = (target - eye).norm();
+            prop_assume!(range > 0.2);
+            let Ok(pose) = look_at(&eye, &target, &Vector3::z()) else {
+                return Ok(());
+            };
+            let camera = PinholeCamera::from_hfov(80, 60, 70.0).unwrap();
+            // Depths scattered around the target's range (some missing), so that many bands
+            // cross the region and many miss it.
+            let mut state = seed;
+            let depth: Vec<f32> = (0..80 * 60)
+                .map(|_| {
+                    state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                    let r = (state >> 40) as f64 / (1u64 << 24) as f64;
+                    if r < 0.05 { 0.0 } else { (range * (0.3 + 1.4 * r)) as f32 }
+                })
+                .collect();
+            let frame = RgbdFrame::new(
+                0.0,
+                RgbImage::filled(80, 60, [9, 9, 9]),
+                DepthImage::from_vec(80, 60, depth).unwrap(),
+                None,
+            )
+            .unwrap();
+            let volume = TsdfVolume::new(TsdfConfig {
+                voxel_size_m: 0.02,
+                roi: Some(Roi::Cylinder {
+                    center_xy: [0.1, -0.2],
+                    z_min: -0.3,
+                    z_max: 0.4,
+                    radius_m,
+                }),
+                ..TsdfConfig::default()
+            })
+            .unwrap();
+            let window = PixelWindow::for_roi(volume.config(), &camera, &pose);
+            prop_assert_eq!(
+                touched(&volume, &frame, &camera, &pose, &window),
+                touched(&volume, &frame, &camera, &pose, &PixelWindow::full(&camera))
+            );
+        }
+    }
+
+    #[test]
+    fn a_region_behind_the_camera_leaves_no_pixel() {
+        let camera = PinholeCamera::from_hfov(80, 60, 70.0).unwrap();
+        // Identity pose: the camera looks along +z; the box lies at z < 0.
+        let window = PixelWindow::of_box(
+            ([-1.0, -1.0, -3.0], [1.0, 1.0, -2.0]),
+            0.1,
+            &camera,
+            &Isometry3::identity(),
+        );
+        assert!(window.rows.is_empty());
+        // Ahead of it, the box covers the image's centre and not its corners.
+        let window = PixelWindow::of_box(
+            ([-0.1, -0.1, 2.0], [0.1, 0.1, 2.5]),
+            0.0,
+            &camera,
+            &Isometry3::identity(),
+        );
+        assert!(window.columns.contains(&40) && window.rows.contains(&30));
+        assert!(!window.columns.contains(&0) && !window.rows.contains(&59));
+        assert!((window.near_m - 2.0).abs() < 1e-6 && (window.far_m - 2.5).abs() < 1e-6);
     }
 }

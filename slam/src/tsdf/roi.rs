@@ -147,6 +147,22 @@ impl Roi {
         }
     }
 
+    /// The smallest axis-aligned box `(min, max)` (metres) holding the region.
+    pub fn bounding_box(&self) -> ([f64; 3], [f64; 3]) {
+        match *self {
+            Roi::Box { min, max } => (min, max),
+            Roi::Cylinder {
+                center_xy,
+                z_min,
+                z_max,
+                radius_m,
+            } => (
+                [center_xy[0] - radius_m, center_xy[1] - radius_m, z_min],
+                [center_xy[0] + radius_m, center_xy[1] + radius_m, z_max],
+            ),
+        }
+    }
+
     /// Whether the point (metres) lies inside the region.
     pub fn contains(&self, p: [f64; 3]) -> bool {
         self.intersects_box(p, p)
