@@ -6,7 +6,8 @@ resolution (8), depth range and region of interest (--roi, as `scarp map --roi`:
 block coordinates are filtered to the blocks intersecting the region inside the timer, as scarp
 filters them); ground-truth poses. With --scarp-map (scarp's map.json of the same sequence and
 settings) it prints scarp's figures beside Open3D's and the speed-up Open3D time / scarp time of
-integration (median, p90) and meshing. Odometry (with --odometry-pairs N): Open3D's hybrid RGBD odometry (t.pipelines.odometry,
+integration (median, p90) and meshing. With --scarp BIN it runs `BIN map` itself on the same
+sequence and settings, just before Open3D, so both sides are timed in one run. Odometry (with --odometry-pairs N): Open3D's hybrid RGBD odometry (t.pipelines.odometry,
 Method.Hybrid, 3 levels) on the first N consecutive frame pairs, initialised with the state
 estimate's relative motion as scarp is; its per-pair time and its ATE over those frames (chained,
 SE(3)-aligned like `scarp eval traj`) are printed next to scarp's figures read from a map.json
@@ -14,7 +15,10 @@ SE(3)-aligned like `scarp eval traj`) are printed next to scarp's figures read f
 
 Setup (Debian):  apt-get install libusb-1.0-0 libgomp1
                  pip install open3d-cpu==0.19.0   (0.20's CPU wheel gives empty TSDF meshes)
-Usage:           scarp render --path orbit --frames 120 --no-noise --out /tmp/orbit
+Usage:           scarp render --path orbit --frames 120 --seed 3 --out /tmp/orbit
+                 python3 slam/benches/compare_open3d.py /tmp/orbit --voxel 0.01 --max-depth 8 \
+                     [--roi cyl:x,y,z0,z1,r] --scarp target/release/scarp
+                 or, from a map.json made beforehand:
                  scarp map /tmp/orbit --poses groundtruth --voxel 0.01 --out /tmp/map --json
                  python3 slam/benches/compare_open3d.py /tmp/orbit --voxel 0.01 [--frames N] \
                      [--max-depth 8] [--roi cyl:x,y,z0,z1,r] --scarp-map /tmp/map/map.json
@@ -27,7 +31,11 @@ Prints the median and p90 integration time per frame (block allocation + integra
 """
 
 import argparse
+import atexit
 import json
+import shutil
+import subprocess
+import tempfile
 import statistics
 import time
 import tomllib
@@ -80,9 +88,12 @@ def main():
         help="Open3D meshing weight threshold (Open3D's default 3: voxels seen in < 3 frames)",
     )
     parser.add_argument("--scarp-map", type=Path, help="scarp's map.json to print beside")
+    parser.add_argument("--scarp", type=Path, help="scarp binary: run `scarp map` in this run")
     args = parser.parse_args()
-    args.roi = parse_roi(args.roi) if args.roi else None
     result = {"open3d": o3d.__version__}
+    if args.scarp:
+        args.scarp_map = run_scarp_map(args)
+    args.roi = parse_roi(args.roi) if args.roi else None
     if args.frames >= 0:
         result.update(compare_tsdf(args))
     if args.odometry_pairs > 0:
@@ -90,7 +101,7 @@ def main():
     if args.scarp_map:
         ours = json.loads(args.scarp_map.read_text())
         keys = ["integrate_ms_median", "integrate_ms_p90", "mesh_ms", "marching_cubes_ms",
-                "triangles", "blocks",
+                "triangles", "blocks", "blocks_updated_median",
                 "odometry_ms_median", "ate_rmse_m", "estimate_ate_rmse_m"]
         result["scarp"] = {k: ours[k] for k in keys if k in ours}
         # Speed-up of scarp over Open3D (> 1: scarp is faster) for each time both report.
@@ -103,6 +114,20 @@ def main():
                 speedup[k] = result[k] / ours[ours_key]
         result["open3d_over_scarp"] = speedup
     print(json.dumps(result, indent=2))
+
+
+def run_scarp_map(args):
+    """`scarp map` with ground-truth poses and the same voxel, depth range and region; returns
+    the path of its map.json (in a temporary directory kept until the process ends)."""
+    out = Path(tempfile.mkdtemp(prefix="scarp_map_"))
+    atexit.register(shutil.rmtree, out, ignore_errors=True)
+    command = [str(args.scarp), "map", str(args.sequence), "--poses", "groundtruth",
+               "--voxel", str(args.voxel), "--max-depth", str(args.max_depth),
+               "--out", str(out), "--log", "warn"]
+    if args.roi:
+        command += ["--roi", args.roi]
+    subprocess.run(command, check=True, stdout=subprocess.DEVNULL)
+    return out / "map.json"
 
 
 def parse_roi(text):
