@@ -97,7 +97,7 @@ impl Neighbourhood {
                                 n.valid[dst] = w > 0.0 && w > min_weight;
                                 n.tsdf[dst] = block.tsdf[src];
                                 if with_color {
-                                    n.color[dst] = block.color[src];
+                                    n.color[dst] = crate::tsdf::rgb_of(block.color[src]);
                                 }
                             }
                         }

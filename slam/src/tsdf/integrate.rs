@@ -11,13 +11,12 @@
 use nalgebra::{Isometry3, Matrix3, Point3, Vector3};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
-use wide::f32x8;
+use wide::{f32x8, i32x8};
 
 use super::{BLOCK_SIDE, Block, BlockCoord, TsdfError, TsdfVolume};
 use crate::frame::RgbdFrame;
 use crate::geometry::floor_i32;
 use crate::geometry::{PinholeCamera, check_finite_isometry};
-use crate::image::RgbImage;
 
 /// What one integration did.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -72,6 +71,8 @@ pub(super) struct Scratch {
     indices: Vec<u32>,
     /// Per stored block: updated by this frame.
     update: Vec<bool>,
+    /// The frame's colours as little-endian (r, g, b, 0) words.
+    rgbx: Vec<u32>,
 }
 
 /// A rigid transform in f32 for the per-voxel inner loops.
@@ -123,7 +124,14 @@ pub(super) fn integrate(
     }
     let mut scratch = std::mem::take(&mut volume.scratch);
     let window = PixelWindow::for_roi(&volume.config, camera, world_from_camera);
-    touched_blocks(volume, &mut scratch, frame, camera, world_from_camera, &window);
+    touched_blocks(
+        volume,
+        &mut scratch,
+        frame,
+        camera,
+        world_from_camera,
+        &window,
+    );
     // Look the touched blocks up in parallel (read-only), then allocate the missing ones with
     // enough support serially in key order, which keeps storage order independent of the
     // thread count.
@@ -160,14 +168,24 @@ pub(super) fn integrate(
     }
     let kernel = Kernel::new(&volume.config, camera, world_from_camera);
     let depth = frame.depth_m.as_slice();
-    let rgb = &frame.rgb;
+    // Each pixel's colour as one little-endian word (r, g, b, 0), the voxels' layout, so the
+    // kernel fetches a pixel's colour with one load.
+    scratch.rgbx.clear();
+    scratch.rgbx.par_extend(
+        frame
+            .rgb
+            .as_slice()
+            .par_iter()
+            .map(|&[r, g, b]| u32::from_le_bytes([r, g, b, 0])),
+    );
+    let rgbx = &scratch.rgbx;
     volume
         .blocks
         .par_iter_mut()
         .zip(volume.coords.par_iter())
         .zip(scratch.update.par_iter())
         .filter(|(_, u)| **u)
-        .for_each(|((block, coord), _)| kernel.update_block(block, coord, depth, rgb));
+        .for_each(|((block, coord), _)| kernel.update_block(block, coord, depth, rgbx));
     let stats = IntegrationStats {
         blocks_updated: updated,
         blocks_allocated: allocated,
@@ -254,8 +272,7 @@ fn touched_blocks(
                 // stepped along the row.
                 let u0 = window.columns.start as f32;
                 let mut ray = r * Vector3::new((u0 - cx) / fx, (v as f32 - cy) / fy, 1.0);
-                for &d in &data[v * width + window.columns.start..v * width + window.columns.end]
-                {
+                for &d in &data[v * width + window.columns.start..v * width + window.columns.end] {
                     if d >= min_depth_m && d <= max_depth_m {
                         let a = origin + ray * (d - truncation);
                         let b = origin + ray * (d + truncation);
@@ -503,9 +520,8 @@ impl Kernel {
     /// Each row of eight voxels (along x) is one set of eight SIMD lanes: projection, depth
     /// interpolation and the TSDF and weight update are lane-wise and branch-free; only the
     /// pixel loads and the colour blend go voxel by voxel.
-    fn update_block(&self, block: &mut Block, coord: &BlockCoord, depth: &[f32], rgb: &RgbImage) {
+    fn update_block(&self, block: &mut Block, coord: &BlockCoord, depth: &[f32], rgbx: &[u32]) {
         const N: usize = BLOCK_SIDE;
-        let rgb = rgb.as_slice();
         let w = self.width;
         let s = self.voxel_size_m;
         let side = BLOCK_SIDE as i32;
@@ -628,26 +644,27 @@ impl Kernel {
                 let a16 = splat(65536.0) - b16;
                 // The pixel nearest to each projection (its 2×2 neighbourhood's corner on the
                 // projection's side).
-                let nearest = (quad_f
-                    + right.select(one, zero)
-                    + below.select(splat(w as f32), zero))
-                .fast_trunc_int()
-                .to_array();
-                let row_color: &mut [[u8; 3]; N] = (&mut color[base..base + N])
+                let nearest =
+                    (quad_f + right.select(one, zero) + below.select(splat(w as f32), zero))
+                        .fast_trunc_int()
+                        .to_array();
+                let row_color: &mut [[u8; 4]; N] = (&mut color[base..base + N])
                     .try_into()
                     .expect("a block row holds eight voxels");
-                let observed_color = nearest.map(|i| rgb[i as usize]);
-                let blended = [0, 1, 2].map(|k| {
-                    let old = f32x8::new(row_color.map(|c| f32::from(c[k])));
-                    let new = f32x8::new(observed_color.map(|c| f32::from(c[k])));
-                    floor_small((old * a16 + new * b16 + splat(32768.0)) * splat(1.0 / 65536.0))
-                        .fast_trunc_int()
-                        .to_array()
-                });
-                for (x, c) in row_color.iter_mut().enumerate() {
+                let old = i32x8::new(row_color.map(|c| u32::from_le_bytes(c) as i32));
+                let new = i32x8::new(nearest.map(|i| rgbx[i as usize] as i32));
+                let byte = i32x8::splat(0xff);
+                let mut blended = i32x8::splat(0);
+                for shift in [0u32, 8, 16] {
+                    let old = ((old >> shift) & byte).round_float();
+                    let new = ((new >> shift) & byte).round_float();
                     // Each blend of two bytes with shares summing to one stays within 0..=255.
-                    *c = [0, 1, 2].map(|k| blended[k][x] as u8);
+                    let channel = floor_small(
+                        (old * a16 + new * b16 + splat(32768.0)) * splat(1.0 / 65536.0),
+                    );
+                    blended |= channel.fast_trunc_int() << shift;
                 }
+                *row_color = blended.to_array().map(|c| (c as u32).to_le_bytes());
             }
         }
     }

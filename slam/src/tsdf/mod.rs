@@ -187,8 +187,9 @@ pub struct Block {
     pub tsdf: Box<[f32; BLOCK_VOXELS]>,
     /// Accumulated observation weight; 0 means never observed.
     pub weight: Box<[f32; BLOCK_VOXELS]>,
-    /// Weighted running-average sRGB colour.
-    pub color: Box<[[u8; 3]; BLOCK_VOXELS]>,
+    /// Weighted running-average sRGB colour, then a zero byte: a voxel's colour is one
+    /// little-endian 32-bit word, which the integration loads and stores eight at a time.
+    pub color: Box<[[u8; 4]; BLOCK_VOXELS]>,
 }
 
 impl Block {
@@ -196,12 +197,18 @@ impl Block {
         Self {
             tsdf: Box::new([1.0; BLOCK_VOXELS]),
             weight: Box::new([0.0; BLOCK_VOXELS]),
-            color: Box::new([[0; 3]; BLOCK_VOXELS]),
+            color: Box::new([[0; 4]; BLOCK_VOXELS]),
         }
     }
 
     /// Bytes of voxel data in one block.
-    pub const BYTES: usize = BLOCK_VOXELS * (4 + 4 + 3);
+    pub const BYTES: usize = BLOCK_VOXELS * (4 + 4 + 4);
+}
+
+/// The sRGB colour of a stored voxel colour (r, g, b, pad).
+#[inline]
+pub fn rgb_of([r, g, b, _]: [u8; 4]) -> [u8; 3] {
+    [r, g, b]
 }
 
 /// Index of local voxel (x, y, z) inside a block.
@@ -343,7 +350,7 @@ impl TsdfVolume {
         Some(VoxelSample {
             tsdf: block.tsdf[i],
             weight: block.weight[i],
-            color: block.color[i],
+            color: rgb_of(block.color[i]),
         })
     }
 

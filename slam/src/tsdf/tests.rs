@@ -323,7 +323,7 @@ fn box_is_accurate_and_complete() {
     check_watertight(&mesh);
 }
 
-type BlockBits = (BlockCoord, Vec<u32>, Vec<u32>, Vec<[u8; 3]>);
+type BlockBits = (BlockCoord, Vec<u32>, Vec<u32>, Vec<[u8; 4]>);
 
 fn bits(volume: &TsdfVolume) -> Vec<BlockBits> {
     let mut out: Vec<_> = volume
@@ -591,4 +591,34 @@ fn stray_pixels_do_not_allocate_blocks_with_support() {
         })
         .is_err()
     );
+}
+
+#[test]
+fn colours_blend_by_weight() {
+    // A frontal plane at 1 m seen twice from the same pose, in two colours: every observed
+    // voxel takes the first colour, then the rounded mean (equal weights).
+    let (frame, cam) = plane_with_strays(&[]);
+    let mut second = frame.clone();
+    second.rgb = RgbImage::filled(cam.width, cam.height, [100, 21, 240]);
+    let mut volume = TsdfVolume::new(TsdfConfig::default()).unwrap();
+    let pose = Isometry3::identity();
+    volume.integrate(&frame, &cam, &pose).unwrap();
+    // Voxels on the optical axis, 3 cm in front of, on, and 3 cm behind the plane.
+    let on_axis = [97, 100, 103].map(|k| [0, 0, k]);
+    for voxel in on_axis {
+        assert_eq!(volume.voxel(voxel).unwrap().color, COLOR, "{voxel:?}");
+    }
+    volume.integrate(&second, &cam, &pose).unwrap();
+    for voxel in on_axis {
+        let v = volume.voxel(voxel).unwrap();
+        // (200 + 100) / 2, (120 + 21) / 2 = 70.5 rounds up, (40 + 240) / 2.
+        assert_eq!(v.color, [150, 71, 140], "{voxel:?}");
+        // Each observation weighs 1/z².
+        let z = voxel[2] as f32 * VOXEL;
+        assert!(
+            (v.weight - 2.0 / (z * z)).abs() < 1e-4,
+            "{voxel:?}: weight {}",
+            v.weight
+        );
+    }
 }
