@@ -11,11 +11,10 @@
 use nalgebra::{Isometry3, Matrix3, Point3, Vector3};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
-use wide::{f32x8, i32x8};
+use wide::{f32x4, f32x8, i32x8};
 
 use super::{BLOCK_SIDE, Block, BlockCoord, TsdfError, TsdfVolume};
 use crate::frame::RgbdFrame;
-use crate::geometry::floor_i32;
 use crate::geometry::{PinholeCamera, check_finite_isometry};
 
 /// What one integration did.
@@ -427,8 +426,8 @@ fn merge_counts(keys: &mut Vec<(u64, u32)>) {
 /// (Amanatides–Woo traversal), so no block along the truncation band is skipped.
 #[inline]
 fn walk_blocks(a: &Vector3<f32>, b: &Vector3<f32>, mut visit: impl FnMut(BlockCoord)) {
-    let mut cell = [floor_i32(a.x), floor_i32(a.y), floor_i32(a.z)];
-    let end = [floor_i32(b.x), floor_i32(b.y), floor_i32(b.z)];
+    let mut cell = floor_cell(a);
+    let end = floor_cell(b);
     visit(cell);
     let crossed = [0, 1, 2].map(|i| cell[i] != end[i]);
     match crossed {
@@ -480,6 +479,18 @@ fn walk_blocks(a: &Vector3<f32>, b: &Vector3<f32>, mut visit: impl FnMut(BlockCo
         t_max[axis] += t_delta[axis];
         visit(cell);
     }
+}
+
+/// The grid cell holding point `p` (grid units), its three floors in one set of lanes: the
+/// saturating `f32 as i32` conversion costs more than the walk around it. Coordinates beyond
+/// ±2^31 (far outside any packable block key) come out as `i32::MIN`.
+#[inline]
+fn floor_cell(p: &Vector3<f32>) -> BlockCoord {
+    let v = f32x4::new([p.x, p.y, p.z, 0.0]);
+    let truncated = v.fast_trunc_int().round_float();
+    let floor = truncated - truncated.simd_gt(v).select(f32x4::ONE, f32x4::ZERO);
+    let [x, y, z, _] = floor.fast_trunc_int().to_array();
+    [x, y, z]
 }
 
 /// Lane-wise floor of non-negative values below 2^31 (truncation toward zero is the floor
@@ -779,6 +790,23 @@ mod tests {
     }
 
     proptest! {
+        /// The lane-wise floor of a point is `f32::floor` of each coordinate, integers and
+        /// negative values included.
+        #[test]
+        fn floor_cell_is_the_floor(
+            large in -3.0e6f32..3.0e6,
+            small in -40.0f32..40.0,
+            integer in -5i32..5,
+        ) {
+            let p = [large, small, integer as f32];
+            for v in [p, [p[1], p[2], p[0]], [p[2], p[0], p[1]]] {
+                prop_assert_eq!(
+                    floor_cell(&Vector3::from(v)),
+                    v.map(|x| x.floor() as i32)
+                );
+            }
+        }
+
         /// Packing keeps exactly the coordinates within ±2^20, round-trips them and orders keys
         /// as the coordinates' lexicographic order.
         #[test]
