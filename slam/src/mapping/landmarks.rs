@@ -594,7 +594,6 @@ pub fn roi_rect(
     roi: &Roi,
     margin_m: f64,
 ) -> Option<PixelRect> {
-    let (lo, hi) = roi_bounds(roi);
     let camera_from_world = world_from_camera.inverse();
     let (mut u0, mut v0, mut u1, mut v1) = (
         f64::INFINITY,
@@ -603,16 +602,8 @@ pub fn roi_rect(
         f64::NEG_INFINITY,
     );
     let mut behind = 0;
-    for corner in 0..8 {
-        let pick = |a: usize| {
-            if corner >> a & 1 == 1 {
-                hi[a] + margin_m
-            } else {
-                lo[a] - margin_m
-            }
-        };
-        let p = camera_from_world * Point3::new(pick(0), pick(1), pick(2));
-        match camera.project(&p) {
+    for corner in roi.corners(margin_m) {
+        match camera.project(&(camera_from_world * corner)) {
             Some(px) => {
                 u0 = u0.min(px.x);
                 v0 = v0.min(px.y);
@@ -630,22 +621,6 @@ pub fn roi_rect(
         return PixelRect::from_continuous(0.0, 0.0, w - 1.0, h - 1.0, camera.width, camera.height);
     }
     PixelRect::from_continuous(u0, v0, u1, v1, camera.width, camera.height)
-}
-
-/// Axis-aligned bounds of a ROI, metres.
-fn roi_bounds(roi: &Roi) -> ([f64; 3], [f64; 3]) {
-    match *roi {
-        Roi::Box { min, max } => (min, max),
-        Roi::Cylinder {
-            center_xy,
-            z_min,
-            z_max,
-            radius_m,
-        } => (
-            [center_xy[0] - radius_m, center_xy[1] - radius_m, z_min],
-            [center_xy[0] + radius_m, center_xy[1] + radius_m, z_max],
-        ),
-    }
 }
 
 #[cfg(test)]

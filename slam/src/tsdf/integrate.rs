@@ -8,7 +8,7 @@
 //! pixel: the hash map is only consulted once per distinct block. The sorted keys make the
 //! allocation order, and so the whole result, independent of the thread count.
 
-use nalgebra::{Isometry3, Matrix3, Point3, Vector3};
+use nalgebra::{Isometry3, Matrix3, Vector3};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use wide::{f32x4, f32x8, i32x8};
@@ -331,7 +331,7 @@ impl PixelWindow {
             // A block meeting the region lies within its bounding box grown by a block; the
             // extra voxel covers the f32 rounding of the band ends.
             Some(roi) => Self::of_box(
-                roi.bounding_box(),
+                roi,
                 f64::from(config.block_size_m() + config.voxel_size_m),
                 camera,
                 world_from_camera,
@@ -350,27 +350,18 @@ impl PixelWindow {
         }
     }
 
-    /// The pixels whose rays meet the axis-aligned box `(min, max)` (world metres) grown by
-    /// `margin_m` on every side, with one pixel to spare, and the box's camera depths. A box
-    /// reaching behind the camera's centre keeps every column and row (its projection is
-    /// unbounded); one wholly behind it leaves no pixel.
+    /// The pixels whose rays meet the bounding box of `roi` grown by `margin_m` on every side,
+    /// with one pixel to spare, and the grown box's camera depths. A box reaching behind the
+    /// camera's centre keeps every column and row (its projection is unbounded); one wholly
+    /// behind it leaves no pixel.
     fn of_box(
-        (min, max): ([f64; 3], [f64; 3]),
+        roi: &super::Roi,
         margin_m: f64,
         camera: &PinholeCamera,
         world_from_camera: &Isometry3<f64>,
     ) -> Self {
         let camera_from_world = world_from_camera.inverse();
-        let corners = (0..8).map(|c| {
-            let pick = |a: usize| {
-                if c & (1 << a) == 0 {
-                    min[a] - margin_m
-                } else {
-                    max[a] + margin_m
-                }
-            };
-            camera_from_world * Point3::new(pick(0), pick(1), pick(2))
-        });
+        let corners = roi.corners(margin_m).map(|c| camera_from_world * c);
         let mut window = Self::full(camera);
         let (mut near, mut far) = (f64::INFINITY, f64::NEG_INFINITY);
         let (mut u_lo, mut u_hi, mut v_lo, mut v_hi) = (
@@ -885,7 +876,10 @@ mod tests {
         let camera = PinholeCamera::from_hfov(80, 60, 70.0).unwrap();
         // Identity pose: the camera looks along +z; the box lies at z < 0.
         let window = PixelWindow::of_box(
-            ([-1.0, -1.0, -3.0], [1.0, 1.0, -2.0]),
+            &Roi::Box {
+                min: [-1.0, -1.0, -3.0],
+                max: [1.0, 1.0, -2.0],
+            },
             0.1,
             &camera,
             &Isometry3::identity(),
@@ -893,7 +887,10 @@ mod tests {
         assert!(window.rows.is_empty());
         // Ahead of it, the box covers the image's centre and not its corners.
         let window = PixelWindow::of_box(
-            ([-0.1, -0.1, 2.0], [0.1, 0.1, 2.5]),
+            &Roi::Box {
+                min: [-0.1, -0.1, 2.0],
+                max: [0.1, 0.1, 2.5],
+            },
             0.0,
             &camera,
             &Isometry3::identity(),

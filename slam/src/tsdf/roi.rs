@@ -163,6 +163,22 @@ impl Roi {
         }
     }
 
+    /// The eight corners (world metres) of the bounding box grown by `margin_m` on every side;
+    /// corner `c` takes the maximum along axis `a` when bit `a` of `c` is set.
+    pub fn corners(&self, margin_m: f64) -> [nalgebra::Point3<f64>; 8] {
+        let (min, max) = self.bounding_box();
+        std::array::from_fn(|c| {
+            let pick = |a: usize| {
+                if c >> a & 1 == 1 {
+                    max[a] + margin_m
+                } else {
+                    min[a] - margin_m
+                }
+            };
+            nalgebra::Point3::new(pick(0), pick(1), pick(2))
+        })
+    }
+
     /// Whether the point (metres) lies inside the region.
     pub fn contains(&self, p: [f64; 3]) -> bool {
         self.intersects_box(p, p)
