@@ -622,3 +622,31 @@ fn colours_blend_by_weight() {
         );
     }
 }
+
+#[test]
+fn a_region_out_of_view_takes_nothing_from_a_frame() {
+    let (frame, cam) = plane_with_strays(&[]);
+    let pose = Isometry3::identity();
+    // Behind the camera (which looks along +z), and beside its field of view.
+    for roi in [
+        Roi::Box {
+            min: [-1.0, -1.0, -3.0],
+            max: [1.0, 1.0, -0.5],
+        },
+        Roi::Cylinder {
+            center_xy: [40.0, 0.0],
+            z_min: 0.0,
+            z_max: 2.0,
+            radius_m: 1.0,
+        },
+    ] {
+        let mut volume = TsdfVolume::new(TsdfConfig {
+            roi: Some(roi),
+            ..TsdfConfig::default()
+        })
+        .unwrap();
+        let stats = volume.integrate(&frame, &cam, &pose).unwrap();
+        assert_eq!((stats.blocks_updated, stats.blocks_allocated), (0, 0));
+        assert_eq!(volume.block_count(), 0);
+    }
+}
