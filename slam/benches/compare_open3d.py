@@ -92,6 +92,9 @@ def main():
     args = parser.parse_args()
     result = {"open3d": o3d.__version__}
     if args.scarp:
+        if args.frames != 0:
+            # scarp map fuses the whole sequence: timing Open3D on fewer frames is not the same work.
+            parser.error("--scarp runs scarp map on every frame: use it with --frames 0")
         args.scarp_map = run_scarp_map(args)
     args.roi = parse_roi(args.roi) if args.roi else None
     if args.frames >= 0:

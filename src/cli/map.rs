@@ -234,13 +234,14 @@ pub fn run(args: MapArgs) -> anyhow::Result<()> {
         PoseSource::Groundtruth | PoseSource::Estimate => {
             let (volume, integrate_ms, mut blocks_updated) =
                 fuse_with_given_poses(&args, &seq, config)?;
-            blocks_updated.sort_unstable();
+            blocks_updated.sort_by(f64::total_cmp);
             let mut extra = serde_json::Map::new();
             // The median number of blocks a frame updated: with the time per frame, the cost
             // per block, comparable with Open3D's active blocks per frame.
-            if let Some(&median) = blocks_updated.get(blocks_updated.len() / 2) {
-                extra.insert("blocks_updated_median".into(), median.into());
-            }
+            extra.insert(
+                "blocks_updated_median".into(),
+                percentile(&blocks_updated, 0.5).into(),
+            );
             finish(&args, &seq, &volume, integrate_ms, extra, None)
         }
     }
@@ -514,7 +515,7 @@ fn fuse_with_given_poses(
     args: &MapArgs,
     seq: &Sequence,
     config: TsdfConfig,
-) -> anyhow::Result<(TsdfVolume, Vec<f64>, Vec<usize>)> {
+) -> anyhow::Result<(TsdfVolume, Vec<f64>, Vec<f64>)> {
     let mut volume = TsdfVolume::new(config)?;
     let bar = super::progress_bar(seq.len() as u64, "fusing");
     let mut integrate_ms = Vec::with_capacity(seq.len());
@@ -539,7 +540,7 @@ fn fuse_with_given_poses(
             .integrate(&frame, &seq.camera, &pose)
             .with_context(|| format!("integrating frame {i}"))?;
         integrate_ms.push(start.elapsed().as_secs_f64() * 1e3);
-        blocks_updated.push(stats.blocks_updated);
+        blocks_updated.push(stats.blocks_updated as f64);
         bar.inc(1);
     }
     bar.finish_and_clear();

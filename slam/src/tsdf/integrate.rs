@@ -209,8 +209,6 @@ fn touched_blocks(
     let depth = &frame.depth_m;
     let truncation = config.truncation_m();
     let inv_block = 1.0 / config.block_size_m();
-    let block_size = f64::from(config.block_size_m());
-    let voxel = f64::from(config.voxel_size_m);
     let transform = RigidF32::from_isometry(world_from_camera);
     let (fx, fy, cx, cy) = (
         camera.fx as f32,
@@ -230,35 +228,10 @@ fn touched_blocks(
     let max_depth_m = config.max_depth_m.min(window.far_m + truncation);
     let tiles = window.rows.len().div_ceil(ALLOCATION_ROWS);
     scratch.tiles.resize_with(tiles, Vec::new);
-    for keys in &mut scratch.tiles[tiles..] {
-        keys.clear();
-    }
-    // The blocks that can meet the ROI lie in this box of block coordinates (grown by a
-    // block each way against rounding): a cheap first test for blocks and for whole bands.
-    let block_range = config.roi.map(|roi| {
-        let (min, max) = roi.bounding_box();
-        let to_block = |x: f64| ((x + 0.5 * voxel) / block_size).floor();
-        let lo = [0, 1, 2].map(|a| to_block(min[a]) - 2.0);
-        let hi = [0, 1, 2].map(|a| to_block(max[a]) + 2.0);
-        (lo, hi)
-    });
-    let in_roi = |b: BlockCoord| match (&config.roi, &block_range) {
-        (Some(roi), Some((range_lo, range_hi))) => {
-            (0..3).all(|a| (range_lo[a]..range_hi[a]).contains(&f64::from(b[a]))) && {
-                let lo = [0, 1, 2].map(|a| f64::from(b[a]) * block_size - 0.5 * voxel);
-                let hi = [0, 1, 2].map(|a| lo[a] + block_size);
-                roi.intersects_box(lo, hi)
-            }
-        }
-        _ => true,
-    };
-    // Whether a band from `a` to `b` (block units) can reach the ROI's blocks at all.
-    let band_range = block_range.map(|(lo, hi)| (lo.map(|x| x as f32), hi.map(|x| x as f32)));
-    let band_may_reach = |a: &Vector3<f32>, b: &Vector3<f32>| match &band_range {
-        Some((lo, hi)) => (0..3).all(|i| a[i].max(b[i]) >= lo[i] && a[i].min(b[i]) < hi[i]),
-        None => true,
-    };
-    scratch.tiles[..tiles]
+    let roi_blocks = config.roi.map(|roi| RoiBlocks::new(roi, config));
+    let in_roi = |b: BlockCoord| roi_blocks.as_ref().is_none_or(|r| r.meets(b));
+    scratch
+        .tiles
         .par_iter_mut()
         .enumerate()
         .for_each(|(tile, keys)| {
@@ -292,7 +265,7 @@ fn touched_blocks(
                     if d >= min_depth_m && d <= max_depth_m {
                         let a = origin + ray * (d - truncation);
                         let b = origin + ray * (d + truncation);
-                        if band_may_reach(&a, &b) {
+                        if roi_blocks.as_ref().is_none_or(|r| r.band_may_reach(&a, &b)) {
                             walk_blocks(&a, &b, &mut visit);
                         }
                     }
@@ -307,6 +280,50 @@ fn touched_blocks(
         scratch.keys.extend_from_slice(tile);
     }
     merge_counts(&mut scratch.keys);
+}
+
+/// A region of interest and the box of block coordinates holding every block that can meet it
+/// (grown by a block each way against rounding): a cheap first test for blocks and for whole
+/// bands before the exact one.
+struct RoiBlocks {
+    roi: super::Roi,
+    /// First and one-past-last block coordinate on each axis.
+    lo: [i32; 3],
+    hi: [i32; 3],
+    block_size_m: f64,
+    voxel_size_m: f64,
+}
+
+impl RoiBlocks {
+    fn new(roi: super::Roi, config: &super::TsdfConfig) -> Self {
+        let block_size_m = f64::from(config.block_size_m());
+        let voxel_size_m = f64::from(config.voxel_size_m);
+        let (min, max) = roi.bounding_box();
+        // Block b spans [b·block − ½ voxel, (b + 1)·block − ½ voxel).
+        let to_block = |x: f64| ((x + 0.5 * voxel_size_m) / block_size_m).floor() as i32;
+        Self {
+            roi,
+            lo: min.map(|x| to_block(x).saturating_sub(2)),
+            hi: max.map(|x| to_block(x).saturating_add(2)),
+            block_size_m,
+            voxel_size_m,
+        }
+    }
+
+    /// Whether block `b` meets the region (exact).
+    fn meets(&self, b: BlockCoord) -> bool {
+        (0..3).all(|a| (self.lo[a]..self.hi[a]).contains(&b[a])) && {
+            let lo = b.map(|c| f64::from(c) * self.block_size_m - 0.5 * self.voxel_size_m);
+            self.roi
+                .intersects_box(lo, lo.map(|x| x + self.block_size_m))
+        }
+    }
+
+    /// Whether a band from `a` to `b` (block units) can reach a block that meets the region.
+    #[inline]
+    fn band_may_reach(&self, a: &Vector3<f32>, b: &Vector3<f32>) -> bool {
+        (0..3).all(|i| a[i].max(b[i]) >= self.lo[i] as f32 && a[i].min(b[i]) < self.hi[i] as f32)
+    }
 }
 
 /// The pixels whose truncation band can reach a region: a rectangle of columns and rows, and
@@ -552,8 +569,8 @@ impl Kernel {
     /// unmeasured). Colour comes from the nearest pixel. Observations weigh 1/z².
     ///
     /// Each row of eight voxels (along x) is one set of eight SIMD lanes: projection, depth
-    /// interpolation and the TSDF and weight update are lane-wise and branch-free; only the
-    /// pixel loads and the colour blend go voxel by voxel.
+    /// interpolation, the TSDF and weight update and the colour blend are lane-wise and
+    /// branch-free; only the pixel loads go voxel by voxel.
     fn update_block(&self, block: &mut Block, coord: &BlockCoord, depth: &[f32], rgbx: &[u32]) {
         const N: usize = BLOCK_SIDE;
         let w = self.width;
