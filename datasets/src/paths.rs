@@ -92,7 +92,7 @@ pub fn lawnmower(
 /// The terrain's mean height (world z), m: the datum of survey altitudes.
 pub fn mean_terrain_height_m(world: &World) -> f64 {
     let heights = &world.heightfield.heights_m;
-    heights.iter().map(|&h| f64::from(h)).sum::<f64>() / heights.len().max(1) as f64
+    heights.iter().sum::<f64>() / heights.len().max(1) as f64
 }
 
 /// Like [`lawnmower`], over the rectangle `area` = (x_min, y_min, x_max, y_max) (world x, y,

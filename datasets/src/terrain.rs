@@ -9,25 +9,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::DatasetError;
 use crate::noise::fbm_2d;
-
-/// A regular grid of terrain heights in the world frame (ENU metres). Sample (i, j) sits at
-/// x = `origin_x_m` + i·`spacing_m`, y = `origin_y_m` + j·`spacing_m`; row j = 0 is the
-/// southern edge.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Heightfield {
-    /// x of the south-west sample, metres.
-    pub origin_x_m: f64,
-    /// y of the south-west sample, metres.
-    pub origin_y_m: f64,
-    /// Distance between neighbouring samples, metres.
-    pub spacing_m: f64,
-    /// Samples along x (columns).
-    pub nx: usize,
-    /// Samples along y (rows).
-    pub ny: usize,
-    /// Heights in metres, row-major from the south-west corner: index j·nx + i.
-    pub heights_m: Vec<f32>,
-}
+pub use scarp_slam::geometry::Heightfield;
 
 /// Parameters of the procedural fault-scarp terrain.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -104,10 +86,10 @@ impl ProceduralTerrain {
         let heights_m = (0..n * n)
             .map(|k| {
                 let (i, j) = (k % n, k / n);
-                self.height_at(
+                mesh_precision(self.height_at(
                     origin + i as f64 * self.resolution_m,
                     origin + j as f64 * self.resolution_m,
-                ) as f32
+                ))
             })
             .collect();
         Ok(Heightfield {
@@ -121,105 +103,63 @@ impl ProceduralTerrain {
     }
 }
 
-impl Heightfield {
-    /// The height at sample (i, j).
-    fn sample(&self, i: usize, j: usize) -> f32 {
-        self.heights_m[j * self.nx + i]
-    }
+/// `height_m` rounded to the f32 precision of the terrain mesh's vertices, so that the
+/// heightfield the planner and the clearance checks read is the very surface the renderer draws.
+fn mesh_precision(height_m: f64) -> f64 {
+    f64::from(height_m as f32)
+}
 
-    /// Bilinearly interpolated height at (x, y), or `None` outside the grid.
-    pub fn height_at(&self, x_m: f64, y_m: f64) -> Option<f64> {
-        let gx = (x_m - self.origin_x_m) / self.spacing_m;
-        let gy = (y_m - self.origin_y_m) / self.spacing_m;
-        if !(gx >= 0.0 && gy >= 0.0 && gx <= (self.nx - 1) as f64 && gy <= (self.ny - 1) as f64) {
-            return None;
+/// `heightfield` as a triangle mesh in world coordinates, two triangles a cell, wound
+/// counter-clockwise seen from above, with normals from central differences.
+pub fn terrain_mesh(heightfield: &Heightfield) -> TriangleMesh {
+    let hf = heightfield;
+    let (nx, ny) = (hf.nx, hf.ny);
+    let sample = |i: usize, j: usize| hf.node(i, j) as f32;
+    let mut mesh = TriangleMesh::default();
+    mesh.positions.reserve(nx * ny);
+    mesh.normals.reserve(nx * ny);
+    for j in 0..ny {
+        for i in 0..nx {
+            mesh.positions.push(Point3::new(
+                (hf.origin_x_m + i as f64 * hf.spacing_m) as f32,
+                (hf.origin_y_m + j as f64 * hf.spacing_m) as f32,
+                sample(i, j),
+            ));
+            let dzdx = (sample((i + 1).min(nx - 1), j) - sample(i.saturating_sub(1), j))
+                / (((i + 1).min(nx - 1) - i.saturating_sub(1)).max(1) as f64 * hf.spacing_m) as f32;
+            let dzdy = (sample(i, (j + 1).min(ny - 1)) - sample(i, j.saturating_sub(1)))
+                / (((j + 1).min(ny - 1) - j.saturating_sub(1)).max(1) as f64 * hf.spacing_m) as f32;
+            mesh.normals
+                .push(Vector3::new(-dzdx, -dzdy, 1.0).normalize());
         }
-        let (i, j) = (
-            (gx.floor() as usize).min(self.nx.saturating_sub(2)),
-            (gy.floor() as usize).min(self.ny.saturating_sub(2)),
-        );
-        let (fx, fy) = (gx - i as f64, gy - j as f64);
-        let h = |di: usize, dj: usize| {
-            f64::from(self.sample((i + di).min(self.nx - 1), (j + dj).min(self.ny - 1)))
-        };
-        let south = h(0, 0) + (h(1, 0) - h(0, 0)) * fx;
-        let north = h(0, 1) + (h(1, 1) - h(0, 1)) * fx;
-        Some(south + (north - south) * fy)
     }
-
-    /// The (x, y) extent: `(min_x, min_y, max_x, max_y)`, metres.
-    pub fn extent(&self) -> (f64, f64, f64, f64) {
-        (
-            self.origin_x_m,
-            self.origin_y_m,
-            self.origin_x_m + (self.nx - 1) as f64 * self.spacing_m,
-            self.origin_y_m + (self.ny - 1) as f64 * self.spacing_m,
-        )
-    }
-
-    /// Smallest and largest height, metres.
-    pub fn height_range(&self) -> (f32, f32) {
-        self.heights_m
-            .iter()
-            .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &h| {
-                (lo.min(h), hi.max(h))
-            })
-    }
-
-    /// The terrain as a triangle mesh in world coordinates, two triangles a cell, wound
-    /// counter-clockwise seen from above, with normals from central differences.
-    pub fn to_mesh(&self) -> TriangleMesh {
-        let (nx, ny) = (self.nx, self.ny);
-        let mut mesh = TriangleMesh::default();
-        mesh.positions.reserve(nx * ny);
-        mesh.normals.reserve(nx * ny);
-        for j in 0..ny {
-            for i in 0..nx {
-                mesh.positions.push(Point3::new(
-                    (self.origin_x_m + i as f64 * self.spacing_m) as f32,
-                    (self.origin_y_m + j as f64 * self.spacing_m) as f32,
-                    self.sample(i, j),
-                ));
-                let dzdx = (self.sample((i + 1).min(nx - 1), j)
-                    - self.sample(i.saturating_sub(1), j))
-                    / (((i + 1).min(nx - 1) - i.saturating_sub(1)).max(1) as f64 * self.spacing_m)
-                        as f32;
-                let dzdy = (self.sample(i, (j + 1).min(ny - 1))
-                    - self.sample(i, j.saturating_sub(1)))
-                    / (((j + 1).min(ny - 1) - j.saturating_sub(1)).max(1) as f64 * self.spacing_m)
-                        as f32;
-                mesh.normals
-                    .push(Vector3::new(-dzdx, -dzdy, 1.0).normalize());
-            }
+    for j in 0..ny.saturating_sub(1) {
+        for i in 0..nx.saturating_sub(1) {
+            let a = (j * nx + i) as u32;
+            let (b, c, d) = (a + 1, a + nx as u32, a + nx as u32 + 1);
+            mesh.faces.push([a, b, d]);
+            mesh.faces.push([a, d, c]);
         }
-        for j in 0..ny.saturating_sub(1) {
-            for i in 0..nx.saturating_sub(1) {
-                let a = (j * nx + i) as u32;
-                let (b, c, d) = (a + 1, a + nx as u32, a + nx as u32 + 1);
-                mesh.faces.push([a, b, d]);
-                mesh.faces.push([a, d, c]);
-            }
-        }
-        mesh
     }
+    mesh
+}
 
-    /// Reads an ESRI ASCII grid (`.asc`): header keys `ncols`, `nrows`, `xllcorner`|`xllcenter`,
-    /// `yllcorner`|`yllcenter`, `cellsize` and optional `NODATA_value`, then `nrows` rows of
-    /// heights from the north edge southwards. The grid is re-centred on the world origin (the
-    /// DEM's own projected coordinates are dropped), and NODATA cells take the lowest valid
-    /// height.
-    ///
-    /// # Errors
-    /// [`DatasetError::Io`] for an unreadable file; [`DatasetError::Parse`] naming the line for
-    /// a bad header, a bad number, a wrong value count, or a grid with no valid height.
-    pub fn read_esri_ascii(path: &Path) -> Result<Self, DatasetError> {
-        let text = std::fs::read_to_string(path).map_err(|e| DatasetError::io(path, e))?;
-        parse_esri_ascii(&text).map_err(|(line, message)| DatasetError::Parse {
-            path: path.to_path_buf(),
-            line,
-            message,
-        })
-    }
+/// Reads an ESRI ASCII grid (`.asc`): header keys `ncols`, `nrows`, `xllcorner`|`xllcenter`,
+/// `yllcorner`|`yllcenter`, `cellsize` and optional `NODATA_value`, then `nrows` rows of
+/// heights from the north edge southwards. The grid is re-centred on the world origin (the
+/// DEM's own projected coordinates are dropped), and NODATA cells take the lowest valid
+/// height.
+///
+/// # Errors
+/// [`DatasetError::Io`] for an unreadable file; [`DatasetError::Parse`] naming the line for
+/// a bad header, a bad number, a wrong value count, or a grid with no valid height.
+pub fn read_esri_ascii(path: &Path) -> Result<Heightfield, DatasetError> {
+    let text = std::fs::read_to_string(path).map_err(|e| DatasetError::io(path, e))?;
+    parse_esri_ascii(&text).map_err(|(line, message)| DatasetError::Parse {
+        path: path.to_path_buf(),
+        line,
+        message,
+    })
 }
 
 fn parse_esri_ascii(text: &str) -> Result<Heightfield, (usize, String)> {
@@ -299,7 +239,7 @@ fn parse_esri_ascii(text: &str) -> Result<Heightfield, (usize, String)> {
         heights_m.extend(
             values[file_row * nx..(file_row + 1) * nx]
                 .iter()
-                .map(|&v| if is_valid(v) { v as f32 } else { lowest as f32 }),
+                .map(|&v| mesh_precision(if is_valid(v) { v } else { lowest })),
         );
     }
     Ok(Heightfield {
@@ -362,12 +302,12 @@ mod tests {
         let up = h.height_at(15.0 * nx_, 15.0 * ny_).unwrap();
         let down = h.height_at(-15.0 * nx_, -15.0 * ny_).unwrap();
         assert!((up - down - t.scarp_height_m).abs() < 0.1, "{up} {down}");
-        let mesh = h.to_mesh();
+        let mesh = terrain_mesh(&h);
         mesh.validate().unwrap();
         assert_eq!(mesh.face_count(), 2 * 40 * 40);
         // Every face normal points up.
         assert!((0..mesh.face_count()).all(|i| mesh.face_normal(i).z > 0.0));
         // Interpolation reproduces the samples at grid points.
-        assert!((h.height_at(-20.0, -20.0).unwrap() - f64::from(h.heights_m[0])).abs() < 1e-6);
+        assert!((h.height_at(-20.0, -20.0).unwrap() - h.heights_m[0]).abs() < 1e-6);
     }
 }

@@ -67,11 +67,8 @@ pub enum PlanError {
         target_z_m: f64,
     },
     /// The terrain grid is malformed.
-    #[error("terrain: {reason}")]
-    InvalidTerrain {
-        /// What is wrong.
-        reason: String,
-    },
+    #[error(transparent)]
+    InvalidTerrain(#[from] scarp_slam::SlamError),
     /// An obstacle is malformed.
     #[error("obstacle {index}: {reason}")]
     InvalidObstacle {

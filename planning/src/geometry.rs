@@ -1,7 +1,8 @@
 //! Shared geometric types: waypoints, paths, angles, the target's point-set statistics and its
 //! vertical bounding cylinder. All positions are world ENU metres (x east, y north, z up).
 
-use nalgebra::{Matrix3, Point3, Vector3};
+use nalgebra::{Point3, Vector3};
+use scarp_slam::geometry::{eigenpairs_ascending, mean_and_scatter};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{PlanError, check_finite, check_point, check_positive};
@@ -119,29 +120,17 @@ impl PointSetPca {
         for (i, p) in points.iter().enumerate() {
             check_point(format!("points[{i}]"), p)?;
         }
-        let n = points.len() as f64;
-        let mean = points
-            .iter()
-            .fold(Vector3::zeros(), |acc, p| acc + p.coords)
-            / n;
-        let mut cov = Matrix3::zeros();
-        for p in points {
-            let d = p.coords - mean;
-            cov += d * d.transpose();
-        }
-        cov /= n;
-        let eig = cov.symmetric_eigen();
-        let mut order = [0usize, 1, 2];
-        order.sort_by(|&a, &b| eig.eigenvalues[a].total_cmp(&eig.eigenvalues[b]));
-        let mut axes = order.map(|k| eig.eigenvectors.column(k).into_owned().normalize());
+        let (centroid_m, scatter) = mean_and_scatter(points);
+        let pairs = eigenpairs_ascending(&(scatter / points.len() as f64));
+        let mut axes = pairs.map(|(_, vector)| vector.normalize());
         if axes[0].z < 0.0 {
             axes[0] = -axes[0];
         }
         // Make the frame right-handed (DESIGN errata: never negate an axis arbitrarily).
         axes[2] = axes[0].cross(&axes[1]);
         Ok(Self {
-            centroid_m: Point3::from(mean),
-            eigenvalues_m2: order.map(|k| eig.eigenvalues[k].max(0.0)),
+            centroid_m,
+            eigenvalues_m2: pairs.map(|(value, _)| value.max(0.0)),
             axes,
         })
     }
@@ -260,7 +249,7 @@ mod tests {
             .collect();
         let pca = PointSetPca::from_points(&pts).unwrap();
         assert!(pca.axes[0].z >= 0.0);
-        let det = Matrix3::from_columns(&pca.axes).determinant();
+        let det = nalgebra::Matrix3::from_columns(&pca.axes).determinant();
         assert!((det - 1.0).abs() < 1e-9);
         assert!(pca.eigenvalues_m2[0] <= pca.eigenvalues_m2[1]);
         assert!(pca.eigenvalues_m2[1] <= pca.eigenvalues_m2[2]);

@@ -74,6 +74,12 @@ pub enum SlamError {
     /// the target, or a view direction parallel to `up`).
     #[error("degenerate geometry: {0}")]
     Degenerate(String),
+    /// A heightfield whose shape or values are unusable.
+    #[error("terrain heightfield: {reason}")]
+    InvalidHeightfield {
+        /// What is wrong (names the field and value).
+        reason: String,
+    },
     /// A setting is out of range.
     #[error("invalid setting `{field}`: {reason}")]
     InvalidConfig {

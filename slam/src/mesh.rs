@@ -346,19 +346,16 @@ impl TriangleMesh {
             .bounds()
             .ok_or_else(|| SlamError::Degenerate("volume of an empty mesh".into()))?;
         let reference: Point3<f64> = nalgebra::center(&lo, &hi).cast();
-        let (mut volume6, mut moment) = (0.0f64, Vector3::<f64>::zeros());
-        for i in 0..self.faces.len() {
-            let [a, b, c] = self.triangle(i).map(|p| p - reference);
-            let v6 = a.dot(&b.cross(&c));
-            volume6 += v6;
-            moment += v6 * (a + b + c) / 4.0;
-        }
+        let sums = crate::geometry::tetrahedron_sums(
+            (0..self.faces.len()).map(|i| self.triangle(i).map(|p| p - reference)),
+        );
+        let volume6 = sums.volume6;
         if volume6.abs() < 1e-15 {
             return Err(SlamError::Degenerate("mesh encloses no volume".into()));
         }
         Ok(VolumeProperties {
             volume_m3: volume6 / 6.0,
-            centroid: reference + moment / volume6,
+            centroid: reference + sums.moment6 / volume6,
         })
     }
 }

@@ -6,10 +6,11 @@ use std::time::Instant;
 
 use anyhow::Context;
 use clap::{Args, ValueEnum};
-use nalgebra::{Isometry3, UnitQuaternion};
+use nalgebra::Isometry3;
 use scarp_datasets::sequence::Sequence;
 use scarp_export::atomic::write_bytes_atomically;
 use scarp_export::tum::{StampedPose, write_tum_trajectory};
+use scarp_slam::geometry::renormalized;
 use scarp_slam::keyframes::{KeyframeConfig, KeyframeSelector};
 use scarp_slam::odometry::{OdometryConfig, SourceFrame, TrackingReference, frame_pyramid, track};
 use serde::Serialize;
@@ -201,15 +202,6 @@ pub fn track_sequence(
         on_frame();
     }
     Ok(result)
-}
-
-/// The transform with its quaternion renormalised: chained products drift off unit length, and
-/// the drift would grow with every frame.
-fn renormalized(t: &Isometry3<f64>) -> Isometry3<f64> {
-    Isometry3::from_parts(
-        t.translation,
-        UnitQuaternion::new_normalize(*t.rotation.quaternion()),
-    )
 }
 
 fn median(values: &[f64]) -> f64 {

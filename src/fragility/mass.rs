@@ -2,6 +2,7 @@
 
 use nalgebra::{Matrix3, Point3, Vector3};
 use scarp_slam::TriangleMesh;
+use scarp_slam::geometry::tetrahedron_sums;
 use serde::{Deserialize, Serialize};
 
 use super::FragilityError;
@@ -18,16 +19,6 @@ pub(crate) struct VolumeIntegrals {
     pub covariance: Matrix3<f64>,
 }
 
-/// Signed volume (×6) and the second-moment contribution of the tetrahedron (0, a, b, c).
-/// For a tetrahedron with one vertex at the origin, ∫ r rᵀ dV = det/120 · (Σ vᵢvᵢᵀ + (Σ vᵢ)(Σ vᵢ)ᵀ).
-#[inline]
-fn tetrahedron(a: &Vector3<f64>, b: &Vector3<f64>, c: &Vector3<f64>) -> (f64, Matrix3<f64>) {
-    let det = a.dot(&b.cross(c));
-    let s = a + b + c;
-    let sum = a * a.transpose() + b * b.transpose() + c * c.transpose() + s * s.transpose();
-    (det, sum * (det / 120.0))
-}
-
 /// Integrates volume, centroid and second moment over a closed surface. Tetrahedra are taken
 /// about the centre of the bounds to limit cancellation.
 ///
@@ -38,16 +29,13 @@ pub(crate) fn integrate(solid: &Solid) -> Result<VolumeIntegrals, FragilityError
         .bounds()
         .ok_or_else(|| FragilityError::Degenerate("volume of an empty surface".into()))?;
     let reference = nalgebra::center(&lo, &hi);
-    let mut volume6 = 0.0;
-    let mut moment = Vector3::zeros(); // ∫ r dV × 6 … accumulated as det·(a+b+c)/4
-    let mut second = Matrix3::zeros();
-    for f in &solid.faces {
-        let [a, b, c] = f.map(|v| solid.positions[v as usize] - reference);
-        let (det, m2) = tetrahedron(&a, &b, &c);
-        volume6 += det;
-        moment += det * (a + b + c) / 4.0;
-        second += m2;
-    }
+    let sums = tetrahedron_sums(
+        solid
+            .faces
+            .iter()
+            .map(|f| f.map(|v| solid.positions[v as usize] - reference)),
+    );
+    let volume6 = sums.volume6;
     let diagonal = (hi - lo).norm();
     if volume6.is_nan() || volume6 <= 1e-12 * diagonal.powi(3) {
         return Err(FragilityError::Degenerate(format!(
@@ -56,11 +44,11 @@ pub(crate) fn integrate(solid: &Solid) -> Result<VolumeIntegrals, FragilityError
         )));
     }
     let volume = volume6 / 6.0;
-    let offset = moment / volume6;
+    let offset = sums.moment6 / volume6;
     Ok(VolumeIntegrals {
         volume_m3: volume,
         centroid: reference + offset,
-        covariance: second - volume * offset * offset.transpose(),
+        covariance: sums.second - volume * offset * offset.transpose(),
     })
 }
 

@@ -1,7 +1,8 @@
 //! The Gaussian fit of a point set and what is derived from it: the PCA ellipsoid, λ_max, the
 //! KL divergence between two fits and the differential entropy (paper §III-D).
 
-use nalgebra::{Matrix3, Point3, Rotation3, SymmetricEigen, Vector3};
+use nalgebra::{Matrix3, Point3, Rotation3, SymmetricEigen};
+use scarp_slam::geometry::{eigenpairs_ascending, mean_and_scatter};
 use serde::{Deserialize, Serialize};
 
 use super::LocalizationError;
@@ -43,28 +44,18 @@ impl Gaussian3 {
         if n < 2 || !finite {
             return Err(LocalizationError::TooFewPoints { count: n });
         }
-        let mean = points
-            .iter()
-            .fold(Vector3::zeros(), |acc, p| acc + p.coords)
-            / n as f64;
-        let mut covariance = Matrix3::zeros();
-        for p in points {
-            let d = p.coords - mean;
-            covariance += d * d.transpose();
-        }
-        covariance /= (n - 1) as f64;
+        let (mean, scatter) = mean_and_scatter(points);
         Ok(Self {
-            mean: Point3::from(mean),
-            covariance,
+            mean,
+            covariance: scatter / (n - 1) as f64,
         })
     }
 
     /// The PCA ellipsoid (right-handed frame, axes sorted by decreasing eigenvalue).
     pub fn ellipsoid(&self) -> Ellipsoid {
-        let eig = SymmetricEigen::new(self.covariance);
-        let mut order = [0usize, 1, 2];
-        order.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
-        let mut columns = order.map(|i| eig.eigenvectors.column(i).into_owned());
+        let mut pairs = eigenpairs_ascending(&self.covariance);
+        pairs.reverse();
+        let mut columns = pairs.map(|(_, vector)| vector);
         // Deterministic signs: the largest component of each of the first two axes positive.
         for c in columns.iter_mut().take(2) {
             let imax = c.iamax();
@@ -75,7 +66,7 @@ impl Gaussian3 {
         // Right-handed: the third axis is the cross product of the first two.
         columns[2] = columns[0].cross(&columns[1]);
         let matrix = Matrix3::from_columns(&columns);
-        let eigenvalues_m2 = order.map(|i| eig.eigenvalues[i].max(0.0));
+        let eigenvalues_m2 = pairs.map(|(value, _)| value.max(0.0));
         Ellipsoid {
             center: self.mean,
             world_from_ellipsoid: Rotation3::from_matrix(&matrix),
@@ -127,6 +118,7 @@ impl Gaussian3 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use nalgebra::Vector3;
     use rand::SeedableRng;
     use rand::rngs::Xoshiro256PlusPlus;
     use rand_distr::{Distribution, StandardNormal};

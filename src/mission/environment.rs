@@ -2,19 +2,11 @@
 //! a mesh obstacle, for planning, the clearance checks and the collision log.
 
 use scarp_datasets::world::World;
-use scarp_planning::prelude::{Environment, Heightfield, Obstacle};
+use scarp_planning::prelude::{Environment, Obstacle};
 
 /// The world's terrain and every rock and pedestal, as the planner sees them.
 pub fn planning_environment(world: &World) -> anyhow::Result<Environment> {
-    let h = &world.heightfield;
-    let terrain = Heightfield::new(
-        h.origin_x_m,
-        h.origin_y_m,
-        h.spacing_m,
-        h.nx,
-        h.ny,
-        h.heights_m.iter().map(|&z| f64::from(z)).collect(),
-    )?;
+    let terrain = world.heightfield.clone();
     let mesh_obstacle = |m: &scarp_slam::TriangleMesh| Obstacle::Mesh {
         positions_m: m
             .positions

@@ -61,13 +61,7 @@ where
 {
     let cells = 150usize;
     let (dx, dy) = ((x1 - x0) / cells as f64, (y1 - y0) / cells as f64);
-    let (lo, hi) = world
-        .heightfield
-        .heights_m
-        .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &h| {
-            (lo.min(f64::from(h)), hi.max(f64::from(h)))
-        });
+    let (lo, hi) = world.heightfield.height_range_m();
     let span = (hi - lo).max(1e-6);
     let mut shading = Vec::with_capacity(cells * cells);
     for j in 0..cells {

@@ -174,11 +174,7 @@ impl<'a> Mission<'a> {
             max_x_m: x1 - inset,
             max_y_m: y1 - inset,
         };
-        let ground_max = world
-            .heightfield
-            .heights_m
-            .iter()
-            .fold(f64::NEG_INFINITY, |m, &h| m.max(f64::from(h)));
+        let (_, ground_max) = world.heightfield.height_range_m();
         let altitude_m = ground_max + config.search_height_agl_m;
         let lawn = plan_lawn_mower_clear(
             &area,

@@ -201,9 +201,9 @@ impl World {
     pub fn build(config: WorldConfig, base_dir: &Path) -> Result<Self, DatasetError> {
         let heightfield = match &config.terrain {
             TerrainConfig::Procedural(p) => p.generate()?,
-            TerrainConfig::Dem(d) => Heightfield::read_esri_ascii(&base_dir.join(&d.path))?,
+            TerrainConfig::Dem(d) => crate::terrain::read_esri_ascii(&base_dir.join(&d.path))?,
         };
-        let mut terrain_mesh = heightfield.to_mesh();
+        let mut terrain_mesh = crate::terrain::terrain_mesh(&heightfield);
         terrain_mesh.validate()?;
         let sun = &config.sun;
         if !(0.0..=1.0).contains(&sun.ambient) {

@@ -25,6 +25,16 @@ pub fn quaternion_from_xyzw(
         .ok_or_else(|| SlamError::Degenerate("quaternion with zero norm".into()))
 }
 
+/// `transform` with its quaternion renormalised to unit length. Chained products of
+/// transforms drift off unit length by rounding, and the drift grows with every product; call
+/// this on a pose composed once per frame. Frames and units are those of `transform`.
+pub fn renormalized(transform: &Isometry3<f64>) -> Isometry3<f64> {
+    Isometry3::from_parts(
+        transform.translation,
+        UnitQuaternion::new_normalize(*transform.rotation.quaternion()),
+    )
+}
+
 /// The transform of a TUM trajectory line `tx ty tz qx qy qz qw` (metres, Hamilton quaternion).
 /// TUM lines give `world_from_camera`.
 ///

@@ -16,11 +16,11 @@
 
 use std::time::Instant;
 
-use nalgebra::{Isometry3, Matrix3, Matrix6, UnitQuaternion, Vector6};
+use nalgebra::{Isometry3, Matrix3, Matrix6, Vector6};
 use serde::{Deserialize, Serialize};
 
 use super::MappingError;
-use crate::geometry::check_finite_isometry;
+use crate::geometry::{check_finite_isometry, renormalized};
 use crate::image::gray_from_rgb;
 use crate::keyframes::{KeyframeConfig, KeyframeReason, KeyframeSelector};
 use crate::odometry::OdometryResult;
@@ -385,14 +385,6 @@ impl ModelTracker {
     }
 }
 
-/// The transform with its quaternion renormalised (chained products drift off unit length).
-pub(crate) fn renormalized(t: &Isometry3<f64>) -> Isometry3<f64> {
-    Isometry3::from_parts(
-        t.translation,
-        UnitQuaternion::new_normalize(*t.rotation.quaternion()),
-    )
-}
-
 /// The SE(3) adjoint of `t` for perturbations ordered (translation, rotation):
 /// `t·exp(δ) = exp(Ad·δ)·t`, Ad = [[R, [t]ₓR], [0, R]].
 pub(crate) fn adjoint(t: &Isometry3<f64>) -> Matrix6<f64> {
@@ -423,7 +415,7 @@ pub(crate) fn chain_covariance(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use nalgebra::{Translation3, Vector3};
+    use nalgebra::{Translation3, UnitQuaternion, Vector3};
 
     #[test]
     fn adjoint_moves_a_right_perturbation_to_the_left() {

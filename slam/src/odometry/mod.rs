@@ -48,6 +48,7 @@ use nalgebra::{Isometry3, Matrix6, SymmetricEigen, Translation3, UnitQuaternion,
 use thiserror::Error;
 
 use crate::SlamError;
+use crate::geometry::renormalized;
 use crate::image::{ImagePyramid, gray_from_rgb};
 use crate::{PinholeCamera, RgbdFrame};
 use normal_equations::{NormalEquations, normal_equations};
@@ -331,13 +332,6 @@ pub fn track_frames(
     let current =
         SourceFrame::from_pyramid(camera, &frame_pyramid(current, config.levels), config)?;
     track(&reference, &current, initial_reference_from_current, config)
-}
-
-fn renormalized(t: &Isometry3<f64>) -> Isometry3<f64> {
-    Isometry3::from_parts(
-        t.translation,
-        UnitQuaternion::new_normalize(*t.rotation.quaternion()),
-    )
 }
 
 fn is_finite(t: &Isometry3<f64>) -> bool {
