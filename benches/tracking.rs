@@ -9,11 +9,10 @@
 //!   warped refinement pass.
 //! - `rendered_lawnmower`: the first frames of the default world's lawn-mower survey (20 m
 //!   altitude, 80° HFOV, 2000-frame sweep as `scarp render --path lawnmower`), rendered, with
-//!   eight 36–50 px boxes spread over the frame, and the tracker config of
-//!   `configs/track_lawnmower.toml` (the one the lawn-mower figure uses: no
-//!   refinement pass), then the same with one warped refinement pass re-tracked through the
-//!   pyramid (`_refinement_pass`) or refined from the first pass on the full-resolution level
-//!   (`_refine_from_previous_pass`).
+//!   eight 36–50 px boxes spread over the frame, and the default tracker config (the `scarp`
+//!   preset: no refinement pass), then the same with one warped refinement pass re-tracked
+//!   through the pyramid (`_refinement_pass`) or refined from the first pass on the
+//!   full-resolution level (`_refine_from_previous_pass`).
 //!
 //! Each benchmark's setup runs only when it is selected, so a filtered run (for a profiler)
 //! contains only that benchmark's work.
@@ -105,17 +104,6 @@ fn rendered_lawnmower_frames() -> Vec<(GrayImage, Vec<Detection>)> {
         .collect()
 }
 
-fn lawnmower_config() -> TrackerConfig {
-    let text = include_str!("../configs/track_lawnmower.toml");
-    let table: toml::Table = toml::from_str(text).expect("configs/track_lawnmower.toml parses");
-    table
-        .get("tracker")
-        .cloned()
-        .expect("a [tracker] table")
-        .try_into()
-        .expect("a valid tracker config")
-}
-
 fn bench(c: &mut Criterion) {
     let defaults = TrackerConfig::default();
     let window_15 = {
@@ -140,10 +128,10 @@ fn bench(c: &mut Criterion) {
     bench_step(
         c,
         "rendered_lawnmower",
-        &lawnmower_config(),
+        &TrackerConfig::default(),
         &rendered_lawnmower_frames,
     );
-    let mut refined = lawnmower_config();
+    let mut refined = TrackerConfig::default();
     refined.motion.refinement_passes = 1;
     refined.motion.refine_from_previous_pass = false;
     bench_step(

@@ -18,7 +18,7 @@ use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
 /// How the estimate is aligned to the ground truth before the ATE.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Alignment {
     /// Rotation and translation (Horn).
@@ -27,6 +27,22 @@ pub enum Alignment {
     Sim3,
     /// No alignment: both are in the same world frame.
     None,
+}
+
+impl std::str::FromStr for Alignment {
+    type Err = String;
+
+    /// Parses the names that the config files use: `se3`, `sim3` or `none` (any case).
+    fn from_str(name: &str) -> Result<Self, Self::Err> {
+        match name.to_ascii_lowercase().as_str() {
+            "se3" => Ok(Self::Se3),
+            "sim3" => Ok(Self::Sim3),
+            "none" => Ok(Self::None),
+            _ => Err(format!(
+                "unknown alignment `{name}`: expected `se3`, `sim3` or `none`"
+            )),
+        }
+    }
 }
 
 /// Settings of [`evaluate_trajectory`].

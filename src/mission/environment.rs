@@ -1,11 +1,12 @@
 //! The world as the planner sees it: its terrain as a heightfield and every rock and pedestal as
 //! a mesh obstacle, for planning, the clearance checks and the collision log.
 
+use super::error::MissionResult;
 use scarp_datasets::world::World;
 use scarp_planning::prelude::{Environment, Obstacle};
 
 /// The world's terrain and every rock and pedestal, as the planner sees them.
-pub fn planning_environment(world: &World) -> anyhow::Result<Environment> {
+pub fn planning_environment(world: &World) -> MissionResult<Environment> {
     let terrain = world.heightfield.clone();
     let mesh_obstacle = |m: &scarp_slam::TriangleMesh| Obstacle::Mesh {
         positions_m: m

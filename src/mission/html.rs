@@ -20,6 +20,7 @@ use scarp_planning::plot::{PlotConfig, write_png};
 use scarp_slam::{PinholeCamera, TriangleMesh};
 
 use super::catalog::Catalog;
+use super::error::{MissionError, MissionResult};
 use super::mode::{FlightLogEntry, Mode};
 use super::report::MissionReport;
 use super::safety::SafetyEvent;
@@ -36,8 +37,11 @@ fn mode_color(mode: Mode) -> RGBColor {
     }
 }
 
-fn draw_err(e: impl std::fmt::Display) -> anyhow::Error {
-    anyhow::anyhow!("drawing the mission map: {e}")
+fn draw_err(e: impl std::fmt::Display) -> MissionError {
+    MissionError::Drawing {
+        what: "the mission map",
+        message: e.to_string(),
+    }
 }
 
 /// Hillshade of the heightfield under a sun from the north-west, in [0, 1].
@@ -55,7 +59,7 @@ fn draw_terrain<DB: DrawingBackend>(
     chart: &mut ChartContext<'_, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
     world: &World,
     (x0, y0, x1, y1): (f64, f64, f64, f64),
-) -> anyhow::Result<()>
+) -> MissionResult<()>
 where
     DB::ErrorType: 'static,
 {
@@ -102,7 +106,7 @@ pub fn render_map(
     log: &[FlightLogEntry],
     targets: &Catalog,
     safety_events: &[SafetyEvent],
-) -> anyhow::Result<Vec<u8>> {
+) -> MissionResult<Vec<u8>> {
     let path_of = |e: &FlightLogEntry| {
         e.world_from_camera_truth
             .unwrap_or(e.world_from_camera_estimate)
@@ -234,10 +238,10 @@ pub fn write_mesh_views(
     world: &World,
     mesh: &TriangleMesh,
     dir: &Path,
-) -> anyhow::Result<Vec<String>> {
+) -> MissionResult<Vec<String>> {
     let (lo, hi) = mesh
         .bounds()
-        .ok_or_else(|| anyhow::anyhow!("the mesh is empty"))?;
+        .ok_or_else(|| MissionError::invalid("the mesh is empty"))?;
     let (lo, hi) = (lo.cast::<f64>(), hi.cast::<f64>());
     let center = nalgebra::center(&lo, &hi);
     let radius = 0.5 * (hi - lo).norm();
@@ -251,7 +255,7 @@ pub fn write_mesh_views(
             .rocks
             .first()
             .cloned()
-            .ok_or_else(|| anyhow::anyhow!("the world has no rock"))?
+            .ok_or_else(|| MissionError::invalid("the world has no rock"))?
     }];
     let renderer = Renderer::new(&alone);
     let camera = PinholeCamera::from_hfov(480, 480, 40.0)?;
@@ -306,7 +310,7 @@ pub fn write_report(
     report: &MissionReport,
     log: &[FlightLogEntry],
     targets: &Catalog,
-) -> anyhow::Result<()> {
+) -> MissionResult<()> {
     let map = render_map(world, log, targets, &report.safety_events)?;
     let cfg = PlotConfig {
         width_px: MAP_PX,

@@ -10,7 +10,7 @@
 use std::path::Path;
 use std::time::Instant;
 
-use anyhow::Context;
+use super::error::{Context, MissionError, MissionResult};
 use nalgebra::{Isometry3, Point3, Vector3};
 use scarp_datasets::world::World;
 use scarp_export::atomic::write_bytes_atomically;
@@ -109,7 +109,7 @@ pub fn cylinder_around(
     radius_m: f64,
     ground_m: f64,
     config: &CylinderEstimateConfig,
-) -> anyhow::Result<VerticalCylinder> {
+) -> MissionResult<VerticalCylinder> {
     let bottom = ground_m - config.bottom_below_terrain_m;
     let top = (center.z + config.top_over_center_radii * radius_m).max(bottom + 2.0 * radius_m);
     Ok(VerticalCylinder::new(
@@ -135,7 +135,7 @@ pub fn cylinder_seen_in_frame(
     world_from_camera: &Isometry3<f64>,
     old: &VerticalCylinder,
     max_move_m: f64,
-) -> anyhow::Result<Option<(VerticalCylinder, f64)>> {
+) -> MissionResult<Option<(VerticalCylinder, f64)>> {
     let mid = old.axis_point(0.5 * (old.z_bottom_m + old.z_top_m));
     let gate_px = 0.25 * f64::from(camera.width);
     let seen = perception
@@ -209,7 +209,7 @@ impl MappingSession {
         cylinder: &VerticalCylinder,
         camera: &PinholeCamera,
         config: &MissionConfig,
-    ) -> anyhow::Result<Self> {
+    ) -> MissionResult<Self> {
         let m = &config.mapping;
         let roi = roi_of(cylinder, m.roi_margin_m, m.roi_vertical_margin_m);
         let tsdf = TsdfConfig {
@@ -281,12 +281,13 @@ impl MappingSession {
         &mut self,
         cylinder: &VerticalCylinder,
         config: &MissionConfig,
-    ) -> anyhow::Result<()> {
-        anyhow::ensure!(
-            self.is_empty(),
-            "target {}: the map already holds frames; its cylinder cannot move",
-            self.target_id
-        );
+    ) -> MissionResult<()> {
+        if !self.is_empty() {
+            return Err(MissionError::invalid(format!(
+                "target {}: the map already holds frames; its cylinder cannot move",
+                self.target_id
+            )));
+        }
         let coverage_required = self.coverage_required;
         *self = Self::new(self.target_id, cylinder, &self.camera, config)?;
         self.coverage_required = coverage_required;
@@ -317,7 +318,7 @@ impl MappingSession {
         mut frame: RgbdFrame,
         world_from_camera_estimate: &Isometry3<f64>,
         world_from_camera_truth: Option<&Isometry3<f64>>,
-    ) -> anyhow::Result<()> {
+    ) -> MissionResult<()> {
         if !self.would_map(world_from_camera_estimate) {
             return Ok(());
         }
@@ -361,7 +362,7 @@ fn write_keyframe_trajectories(
     truth: Option<&[StampedPose]>,
     odometry: &[Isometry3<f64>],
     refined: &[Isometry3<f64>],
-) -> anyhow::Result<()> {
+) -> MissionResult<()> {
     let stamped = |poses: &[Isometry3<f64>]| -> Vec<StampedPose> {
         timestamps_s
             .iter()
@@ -438,7 +439,7 @@ pub fn map_to_world(truth: &[StampedPose], poses: &[Isometry3<f64>]) -> Option<I
 
 /// The mission status of a target from [`finish_target`]'s outcome: mapped, or incomplete
 /// (a failure is kept in `report.error`).
-pub fn mapped_status(outcome: anyhow::Result<bool>, report: &mut TargetReport) -> TargetStatus {
+pub fn mapped_status(outcome: MissionResult<bool>, report: &mut TargetReport) -> TargetStatus {
     match outcome {
         Ok(true) => TargetStatus::Mapped,
         Ok(false) => TargetStatus::Incomplete,
@@ -466,7 +467,7 @@ pub fn finish_target(
     dir: &Path,
     report: &mut TargetReport,
     timings: &mut StageTimings,
-) -> anyhow::Result<bool> {
+) -> MissionResult<bool> {
     let clock = Instant::now();
     report.frames_mapped = session.frames_mapped;
     report.coverage = session.coverage.fraction();

@@ -18,6 +18,7 @@ pub mod catalog;
 pub mod config;
 pub mod coverage;
 pub mod environment;
+pub mod error;
 pub mod evaluation;
 pub mod html;
 pub mod mapping;

@@ -32,7 +32,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::Context;
+use super::error::{Context, MissionError, MissionResult};
 use nalgebra::{Isometry3, Point3};
 use scarp_datasets::sequence::Sequence;
 use scarp_datasets::world::World;
@@ -67,7 +67,7 @@ pub struct ProcessInputs<'a> {
 }
 
 /// One line of `flight.txt`: the mode at a frame.
-fn read_flight_log(path: &Path) -> anyhow::Result<Option<BTreeMap<u64, Mode>>> {
+fn read_flight_log(path: &Path) -> MissionResult<Option<BTreeMap<u64, Mode>>> {
     if !path.exists() {
         return Ok(None);
     }
@@ -81,11 +81,11 @@ fn read_flight_log(path: &Path) -> anyhow::Result<Option<BTreeMap<u64, Mode>>> {
         }
         let fields: Vec<&str> = line.split_whitespace().collect();
         let bad = || {
-            anyhow::anyhow!(
+            MissionError::invalid(format!(
                 "{}:{}: expected `timestamp_s mount_pitch_down_deg mode target`, got `{line}`",
                 path.display(),
                 number + 1
-            )
+            ))
         };
         let [t, _, mode, target] = fields[..] else {
             return Err(bad());
@@ -112,16 +112,17 @@ fn time_key(t: f64) -> u64 {
 /// An unreadable flight folder, a frame without a pose estimate, a malformed `flight.txt` or
 /// `origin.toml`, invalid settings, or a write failure. A target whose mapping or analysis
 /// fails is reported in its row, not as an error.
-pub fn process_flight(inputs: &ProcessInputs<'_>) -> anyhow::Result<MissionReport> {
+pub fn process_flight(inputs: &ProcessInputs<'_>) -> MissionResult<MissionReport> {
     let started = Instant::now();
     let config = &inputs.config;
     let seq = Sequence::open(&inputs.flight)
         .with_context(|| format!("opening the flight {}", inputs.flight.display()))?;
-    anyhow::ensure!(
-        !seq.is_empty(),
-        "{}: the flight has no frames",
-        inputs.flight.display()
-    );
+    if seq.is_empty() {
+        return Err(MissionError::invalid(format!(
+            "{}: the flight has no frames",
+            inputs.flight.display()
+        )));
+    }
     let camera = seq.camera;
     let estimates: Vec<Isometry3<f64>> = seq
         .entries
@@ -136,7 +137,7 @@ pub fn process_flight(inputs: &ProcessInputs<'_>) -> anyhow::Result<MissionRepor
                 )
             })
         })
-        .collect::<anyhow::Result<_>>()?;
+        .collect::<MissionResult<_>>()?;
     let modes = read_flight_log(&inputs.flight.join("flight.txt"))?;
     let mode_at = |t: f64| {
         modes
@@ -457,7 +458,7 @@ fn target_cylinder(
     camera: &PinholeCamera,
     plan: &MapPlan,
     config: &MissionConfig,
-) -> anyhow::Result<scarp_planning::prelude::VerticalCylinder> {
+) -> MissionResult<scarp_planning::prelude::VerticalCylinder> {
     let c = &config.cylinder;
     let state = &plan.state;
     let radius = cylinder_radius_m(&state.points, &state.center, c);

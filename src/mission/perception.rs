@@ -18,6 +18,7 @@ use scarp_slam::image::gray_from_rgb;
 use scarp_slam::{PinholeCamera, RgbdFrame};
 
 use super::config::MissionConfig;
+use super::error::MissionResult;
 use crate::detection::simulated::{
     RoleMap, SimulatedDetector, SimulatedDetectorConfig, roles_from_world,
 };
@@ -223,7 +224,7 @@ impl Perception {
     ///
     /// # Errors
     /// Invalid detector, tracker or localization settings.
-    pub fn new(world: &World, config: &MissionConfig, seed: u64) -> anyhow::Result<Self> {
+    pub fn new(world: &World, config: &MissionConfig, seed: u64) -> MissionResult<Self> {
         Self::with_roles(roles_from_world(world), config, seed)
     }
 
@@ -232,7 +233,7 @@ impl Perception {
     ///
     /// # Errors
     /// Invalid detector, tracker or localization settings.
-    pub fn with_roles(roles: RoleMap, config: &MissionConfig, seed: u64) -> anyhow::Result<Self> {
+    pub fn with_roles(roles: RoleMap, config: &MissionConfig, seed: u64) -> MissionResult<Self> {
         Self::with_detector(
             Box::new(mission_detector(&config.detection.simulated, roles, seed)?),
             config.tracker.clone(),
@@ -253,7 +254,7 @@ impl Perception {
         box_source: BoxSource,
         localization: LocalizationConfig,
         seed: u64,
-    ) -> anyhow::Result<Self> {
+    ) -> MissionResult<Self> {
         Ok(Self {
             detector,
             tracker: Tracker::new(tracker)?,
@@ -279,7 +280,7 @@ impl Perception {
         frame: &RgbdFrame,
         camera: &PinholeCamera,
         world_from_camera: &Isometry3<f64>,
-    ) -> anyhow::Result<PerceptionStep> {
+    ) -> MissionResult<PerceptionStep> {
         let clock = Instant::now();
         let detections = self.detector.detect(frame)?;
         let detect_s = clock.elapsed().as_secs_f64();
@@ -329,7 +330,7 @@ impl Perception {
     ///
     /// # Errors
     /// Never in practice: the tracker settings were valid when the mission started.
-    pub fn reset_tracks(&mut self) -> anyhow::Result<()> {
+    pub fn reset_tracks(&mut self) -> MissionResult<()> {
         self.tracker = Tracker::new(self.tracker.config().clone())?;
         Ok(())
     }
@@ -376,7 +377,7 @@ impl Perception {
         world_from_camera: &Isometry3<f64>,
         expected: &Point3<f64>,
         gate_px: f64,
-    ) -> anyhow::Result<Option<BoundingBox>> {
+    ) -> MissionResult<Option<BoundingBox>> {
         let in_camera = world_from_camera.inverse() * expected;
         if in_camera.z <= 0.0 {
             return Ok(None);

@@ -25,7 +25,7 @@ use std::path::{Path, PathBuf};
 use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
 use std::thread::JoinHandle;
 
-use anyhow::Context;
+use super::error::{Context, MissionError, MissionResult};
 use nalgebra::Isometry3;
 use scarp_datasets::sequence::{
     BoxRecord, CameraFile, boxes_from_mask, format_boxes, frame_name, write_depth_png,
@@ -75,7 +75,7 @@ impl FlightOrigin {
     ///
     /// # Errors
     /// A missing or malformed file, named.
-    pub fn read(path: &Path) -> anyhow::Result<Self> {
+    pub fn read(path: &Path) -> MissionResult<Self> {
         let text =
             std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
         toml::from_str(&text).with_context(|| format!("parsing {}", path.display()))
@@ -92,7 +92,7 @@ const QUEUE_FRAMES: usize = 8;
 pub struct FlightRecorder {
     dir: PathBuf,
     queue: Option<SyncSender<RgbdFrame>>,
-    writer: Option<JoinHandle<anyhow::Result<()>>>,
+    writer: Option<JoinHandle<MissionResult<()>>>,
     estimate: Vec<StampedPose>,
     truth: Vec<StampedPose>,
     flight_log: String,
@@ -105,7 +105,7 @@ impl FlightRecorder {
     /// # Errors
     /// When `dir` or its subfolders cannot be created, or `camera.toml` or `origin.toml`
     /// cannot be written.
-    pub fn new(dir: &Path, camera: &PinholeCamera, origin: FlightOrigin) -> anyhow::Result<Self> {
+    pub fn new(dir: &Path, camera: &PinholeCamera, origin: FlightOrigin) -> MissionResult<Self> {
         for sub in ["rgb", "depth", "mask", "groundtruth"] {
             let path = dir.join(sub);
             std::fs::create_dir_all(&path)
@@ -149,7 +149,7 @@ impl FlightRecorder {
         mount_pitch_down_deg: f64,
         mode: Mode,
         world: &World,
-    ) -> anyhow::Result<()> {
+    ) -> MissionResult<()> {
         let t = frame.timestamp_s;
         if let Some(mask) = &frame.instance_mask {
             self.boxes.extend(boxes_from_mask(mask, t, |id| {
@@ -177,9 +177,9 @@ impl FlightRecorder {
             .as_ref()
             .context("the flight recording is already finished")?;
         if queue.send(frame.clone()).is_err() {
-            anyhow::bail!(
-                "the flight recorder's writer stopped; see the error at the end of the run"
-            );
+            return Err(MissionError::invalid(
+                "the flight recorder's writer stopped; see the error at the end of the run",
+            ));
         }
         Ok(())
     }
@@ -189,12 +189,12 @@ impl FlightRecorder {
     ///
     /// # Errors
     /// The writer thread's first error (naming the file), or a list that cannot be written.
-    pub fn finish(mut self) -> anyhow::Result<usize> {
+    pub fn finish(mut self) -> MissionResult<usize> {
         drop(self.queue.take());
         if let Some(writer) = self.writer.take() {
-            writer
-                .join()
-                .map_err(|_| anyhow::anyhow!("the flight recorder's writer thread panicked"))??;
+            writer.join().map_err(|_| {
+                MissionError::invalid("the flight recorder's writer thread panicked")
+            })??;
         }
         let dir = &self.dir;
         write_tum_trajectory(
@@ -216,7 +216,7 @@ impl FlightRecorder {
 }
 
 /// The writer thread: every frame's colour, depth and mask PNGs, until the queue closes.
-fn write_frames(dir: &Path, frames: &Receiver<RgbdFrame>) -> anyhow::Result<()> {
+fn write_frames(dir: &Path, frames: &Receiver<RgbdFrame>) -> MissionResult<()> {
     for frame in frames {
         let name = frame_name(frame.timestamp_s);
         write_rgb_png(&dir.join("rgb").join(&name), &frame.rgb)?;

@@ -5,6 +5,7 @@
 use std::io::Write;
 use std::path::Path;
 
+use super::error::MissionResult;
 use nalgebra::Point3;
 use scarp_export::atomic::{write_atomically, write_bytes_atomically};
 use scarp_export::geojson::{EnuFrame, Geodetic, PointFeature, write_geojson};
@@ -197,7 +198,7 @@ impl MissionReport {
     ///
     /// # Errors
     /// File-system errors naming the file.
-    pub fn write(&self, dir: &Path, origin: Geodetic) -> anyhow::Result<()> {
+    pub fn write(&self, dir: &Path, origin: Geodetic) -> MissionResult<()> {
         let json = serde_json::to_string_pretty(self)?;
         write_bytes_atomically(dir.join("mission.json"), json.as_bytes())?;
         let features: Vec<PointFeature> = self

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
-use anyhow::Context;
+use super::error::{Context, MissionError, MissionResult};
 use nalgebra::{Isometry3, Point3, Vector3};
 use rand::rngs::Xoshiro256PlusPlus;
 use rand::{RngExt, SeedableRng};
@@ -159,9 +159,9 @@ impl<'a> Mission<'a> {
     ///
     /// # Errors
     /// An invalid configuration, or a search pattern the planner cannot clear.
-    pub fn new(inputs: MissionInputs<'a>) -> anyhow::Result<Self> {
+    pub fn new(inputs: MissionInputs<'a>) -> MissionResult<Self> {
         let config = &inputs.config;
-        config.validate().map_err(anyhow::Error::msg)?;
+        config.validate().map_err(MissionError::Config)?;
         let world = inputs.world;
         let cam = &config.planning.camera;
         let camera = PinholeCamera::from_hfov(cam.width_px, cam.height_px, cam.hfov_deg)?;
@@ -289,7 +289,7 @@ impl<'a> Mission<'a> {
     ///
     /// # Errors
     /// Rendering, planning or writing errors; the outputs written so far stay consistent.
-    pub fn run(mut self, progress: &mut dyn FnMut(&Progress)) -> anyhow::Result<MissionReport> {
+    pub fn run(mut self, progress: &mut dyn FnMut(&Progress)) -> MissionResult<MissionReport> {
         let wall = self.inputs.started;
         let mut timings = StageTimings {
             setup_s: wall.elapsed().as_secs_f64(),
@@ -328,7 +328,7 @@ impl<'a> Mission<'a> {
     }
 
     /// One camera period: fly, take a frame, act on it.
-    fn step(&mut self, timings: &mut StageTimings) -> anyhow::Result<()> {
+    fn step(&mut self, timings: &mut StageTimings) -> MissionResult<()> {
         let t = self.motion.time_s() + self.camera_period_s();
         let clock = Instant::now();
         // The climb reflex makes the controller believe it is lower than it is.
@@ -529,7 +529,7 @@ impl<'a> Mission<'a> {
     }
 
     /// Renders the true view and applies the sensor's noise (seeded per frame).
-    fn take_frame(&mut self, t: f64, truth: &Isometry3<f64>) -> anyhow::Result<RgbdFrame> {
+    fn take_frame(&mut self, t: f64, truth: &Isometry3<f64>) -> MissionResult<RgbdFrame> {
         let index = self.frame_index;
         self.frame_index += 1;
         let rendered = self.renderer.render(&self.camera, truth)?;
@@ -546,7 +546,7 @@ impl<'a> Mission<'a> {
         estimate: &Isometry3<f64>,
         truth: &Isometry3<f64>,
         timings: &mut StageTimings,
-    ) -> anyhow::Result<()> {
+    ) -> MissionResult<()> {
         let stage = self.perception.process(frame, &self.camera, estimate)?;
         timings.detect_s += stage.detect_s;
         timings.track_s += stage.track_s;
@@ -653,7 +653,7 @@ impl<'a> Mission<'a> {
         &mut self,
         id: u32,
         timings: &mut StageTimings,
-    ) -> anyhow::Result<()> {
+    ) -> MissionResult<()> {
         if self.resume_point.is_none() {
             self.resume_point = Some(self.motion.current_waypoint());
         }
@@ -674,10 +674,10 @@ impl<'a> Mission<'a> {
             &self.env,
             &config.planning.clearance,
         );
-        let result = plan.map_err(anyhow::Error::from).and_then(|plan| {
+        let result = plan.map_err(MissionError::from).and_then(|plan| {
             self.motion
                 .follow(&plan.path.waypoints[1..], &self.env, &config.planning)
-                .map_err(anyhow::Error::from)
+                .map_err(MissionError::from)
         });
         timings.planning_s += clock.elapsed().as_secs_f64();
         match result {
@@ -702,7 +702,7 @@ impl<'a> Mission<'a> {
         &self,
         points: &[Point3<f64>],
         center: &Point3<f64>,
-    ) -> anyhow::Result<VerticalCylinder> {
+    ) -> MissionResult<VerticalCylinder> {
         let c = &self.inputs.config.cylinder;
         let radius = cylinder_radius_m(points, center, c);
         let ground = self
@@ -728,7 +728,7 @@ impl<'a> Mission<'a> {
         frame: &RgbdFrame,
         estimate: &Isometry3<f64>,
         timings: &mut StageTimings,
-    ) -> anyhow::Result<bool> {
+    ) -> MissionResult<bool> {
         let Some(session) = self.mapping.as_ref() else {
             return Ok(true);
         };
@@ -779,7 +779,7 @@ impl<'a> Mission<'a> {
 
     /// Plans the mapping rings around `cylinder` from where the vehicle is and starts flying
     /// them; on an error the current trajectory is kept.
-    fn fly_rings_around(&mut self, cylinder: &VerticalCylinder) -> anyhow::Result<RingPlan> {
+    fn fly_rings_around(&mut self, cylinder: &VerticalCylinder) -> MissionResult<RingPlan> {
         let config = &self.inputs.config;
         let rings = plan_mapping_rings_clear(
             cylinder,
@@ -803,7 +803,7 @@ impl<'a> Mission<'a> {
         self.ring_plan = Some(rings);
     }
 
-    fn start_mapping(&mut self, id: u32, timings: &mut StageTimings) -> anyhow::Result<()> {
+    fn start_mapping(&mut self, id: u32, timings: &mut StageTimings) -> MissionResult<()> {
         let Some(state) = self.perception.target_state(id) else {
             return self.resume_search(timings);
         };
@@ -847,7 +847,7 @@ impl<'a> Mission<'a> {
         }
     }
 
-    fn finish_mapping(&mut self, id: u32, timings: &mut StageTimings) -> anyhow::Result<()> {
+    fn finish_mapping(&mut self, id: u32, timings: &mut StageTimings) -> MissionResult<()> {
         let Some(session) = self.mapping.take() else {
             return Ok(());
         };
@@ -883,7 +883,7 @@ impl<'a> Mission<'a> {
     }
 
     /// Back to the lawn-mower from where it was left.
-    fn resume_search(&mut self, timings: &mut StageTimings) -> anyhow::Result<()> {
+    fn resume_search(&mut self, timings: &mut StageTimings) -> MissionResult<()> {
         self.perception.reset_tracks()?;
         self.ring_plan = None;
         let clock = Instant::now();
@@ -910,7 +910,7 @@ impl<'a> Mission<'a> {
     }
 
     /// Evaluates, writes every output and returns the report.
-    fn finish(mut self, wall: Instant, mut timings: StageTimings) -> anyhow::Result<MissionReport> {
+    fn finish(mut self, wall: Instant, mut timings: StageTimings) -> MissionResult<MissionReport> {
         let out = self.inputs.out.clone();
         // A target still being mapped when the run stopped is left out of the files: its
         // directory was never written.
@@ -982,7 +982,7 @@ impl<'a> Mission<'a> {
         Ok(self.report)
     }
 
-    fn write_trajectories(&self, out: &Path) -> anyhow::Result<()> {
+    fn write_trajectories(&self, out: &Path) -> MissionResult<()> {
         let poses = |f: fn(&FlightLogEntry) -> Option<Isometry3<f64>>| -> Vec<StampedPose> {
             self.log
                 .iter()

@@ -31,7 +31,7 @@
 pub mod kalman;
 pub mod tracker;
 
-pub use tracker::{TrackedBox, Tracker, TrackerConfig};
+pub use tracker::{TrackedBox, Tracker, TrackerConfig, TrackerPreset};
 
 use scarp_slam::features::FeatureError;
 use thiserror::Error;

@@ -14,7 +14,7 @@ use scarp_planning::plot::{PlotConfig, PlotScene, write_side_view_png, write_top
 use scarp_planning::prelude::*;
 use serde::Serialize;
 
-use crate::mission::environment::planning_environment;
+use scarp::mission::environment::planning_environment;
 
 /// Plan and fly the mapping rings around a target.
 #[derive(Debug, Args)]

@@ -3,7 +3,7 @@
 //! Writes `DIR/tracks.txt` (`t id x_min y_min x_max y_max`, one line per frame and confirmed
 //! track, continuous pixel coordinates) and `DIR/track.json`. When the sequence has
 //! ground-truth boxes (`boxes.txt`), the JSON also scores the tracks (MOTA, ID switches, mean
-//! IoU, false tracks; see [`crate::evaluation::tracking`]).
+//! IoU, false tracks; see [`scarp::evaluation::tracking`]).
 //!
 //! The issue-6 lawn-mower figure comes from:
 //!
@@ -24,14 +24,14 @@ use scarp_export::atomic::{write_atomically, write_bytes_atomically};
 use scarp_slam::image::gray_from_rgb;
 use serde::{Deserialize, Serialize};
 
-use crate::detection::simulated::roles_from_boxes;
-use crate::detection::{
+use scarp::detection::simulated::roles_from_boxes;
+use scarp::detection::{
     BoundingBox, Detector, OnnxDetectorConfig, SimulatedDetector, SimulatedDetectorConfig,
 };
-use crate::evaluation::tracking::{
+use scarp::evaluation::tracking::{
     EvalFrame, TrackObservation, TrackingEvalConfig, TrackingScores, TruthBox, evaluate_tracking,
 };
-use crate::tracking::{TrackedBox, Tracker, TrackerConfig};
+use scarp::tracking::{TrackedBox, Tracker, TrackerConfig};
 
 /// Track target boxes through a sequence (`tracks.txt`, `track.json`).
 #[derive(Debug, Args)]
@@ -132,7 +132,7 @@ fn make_detector(
 /// The YOLO ONNX detector of `model`.
 #[cfg(feature = "onnx")]
 fn onnx_detector(model: &Path, config: &TrackConfig) -> anyhow::Result<Box<dyn Detector>> {
-    let detector = crate::detection::OnnxDetector::load(model, config.onnx_detector.clone())
+    let detector = scarp::detection::OnnxDetector::load(model, config.onnx_detector.clone())
         .with_context(|| format!("loading ONNX model {}", model.display()))?;
     Ok(Box::new(detector))
 }

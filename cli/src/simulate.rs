@@ -1,4 +1,4 @@
-//! `scarp simulate`: the main job, a closed-loop mission on a world (see [`crate::mission`]).
+//! `scarp simulate`: the main job, a closed-loop mission on a world (see [`scarp::mission`]).
 
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -10,8 +10,8 @@ use indicatif::{ProgressBar, ProgressStyle};
 use scarp_datasets::world::World;
 
 use super::world::write_world;
-use crate::mission::config::MissionConfig;
-use crate::mission::simulation::{Mission, MissionInputs};
+use scarp::mission::config::MissionConfig;
+use scarp::mission::simulation::{Mission, MissionInputs};
 
 /// Run the simulated mission on a world: search, localize, map and measure every target.
 #[derive(Debug, Args)]

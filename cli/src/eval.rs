@@ -10,8 +10,8 @@ use scarp_datasets::world::World;
 use scarp_export::ply::read_mesh;
 use scarp_export::tum::read_tum_trajectory;
 
-use crate::evaluation::mesh::{MeshEvalConfig, Visibility, evaluate_mesh};
-use crate::evaluation::trajectory::{Alignment, TrajectoryEvalConfig, evaluate_trajectory};
+use scarp::evaluation::mesh::{MeshEvalConfig, Visibility, evaluate_mesh};
+use scarp::evaluation::trajectory::{Alignment, TrajectoryEvalConfig, evaluate_trajectory};
 
 /// Evaluate outputs against the ground truth.
 #[derive(Debug, Args)]
@@ -74,8 +74,8 @@ pub struct TrajArgs {
     /// Estimated TUM trajectory.
     #[arg(long)]
     pub est: PathBuf,
-    /// Alignment of the estimate before the ATE.
-    #[arg(long, value_enum, default_value = "se3")]
+    /// Alignment of the estimate before the ATE: `se3`, `sim3` or `none`.
+    #[arg(long, default_value = "se3")]
     pub align: Alignment,
     /// Largest timestamp difference of an associated pair, seconds.
     #[arg(long, default_value_t = 0.02)]

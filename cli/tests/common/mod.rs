@@ -9,7 +9,7 @@ use std::process::{Command, Output};
 /// The path of a file in `tests/data/`, as a command-line argument.
 pub fn test_data(name: &str) -> String {
     Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/data")
+        .join("../tests/data")
         .join(name)
         .display()
         .to_string()

@@ -1,4 +1,4 @@
-//! `scarp process`: the rock catalog from a recorded flight (see [`crate::mission::offline`]).
+//! `scarp process`: the rock catalog from a recorded flight (see [`scarp::mission::offline`]).
 
 use std::path::PathBuf;
 
@@ -7,7 +7,7 @@ use clap::Args;
 use scarp_datasets::world::World;
 
 use super::simulate::load_config;
-use crate::mission::offline::{ProcessInputs, process_flight};
+use scarp::mission::offline::{ProcessInputs, process_flight};
 
 /// Process a recorded flight offline: detection, tracking, localization, mapping of every
 /// localized target, BA, meshing, fragility and export, as a live mission does.

@@ -1,5 +1,5 @@
 //! `scarp campaign`: the mission over many worlds and seeds, in parallel processes, resumable
-//! and shardable; `scarp campaign merge` joins shards. See [`crate::campaign`].
+//! and shardable; `scarp campaign merge` joins shards. See [`scarp::campaign`].
 
 use std::collections::VecDeque;
 use std::path::{Path, PathBuf};
@@ -12,11 +12,11 @@ use anyhow::{Context, bail};
 use clap::{Args, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 
-use crate::campaign::plan::{
+use scarp::campaign::plan::{
     RunSpec, Shard, parse_seeds, parse_worlds, plan_runs, run_is_finished,
 };
-use crate::campaign::table::{FAILED_MARKER, RunState};
-use crate::campaign::{CAMPAIGN_JSON, CampaignHeader, CampaignReport};
+use scarp::campaign::table::{FAILED_MARKER, RunState};
+use scarp::campaign::{CAMPAIGN_JSON, CampaignHeader, CampaignReport};
 
 /// Run the mission over many worlds and seeds and tabulate every figure (`campaign.json`,
 /// `campaign.md`). Finished runs are skipped, so an interrupted campaign resumes where it
@@ -103,7 +103,7 @@ pub fn run(args: CampaignArgs) -> anyhow::Result<()> {
             let text = std::fs::read_to_string(path)
                 .with_context(|| format!("reading {}", path.display()))?;
             // Fail here, once, rather than in every run.
-            crate::mission::config::MissionConfig::from_toml_str(
+            scarp::mission::config::MissionConfig::from_toml_str(
                 &text,
                 &path.display().to_string(),
             )?;
@@ -163,7 +163,7 @@ pub fn run(args: CampaignArgs) -> anyhow::Result<()> {
         bail!(
             "{} run(s) did not finish (see {} and each run's run.log)",
             failures.max(unfinished),
-            out.join(crate::campaign::CAMPAIGN_MD).display()
+            out.join(scarp::campaign::CAMPAIGN_MD).display()
         );
     }
     Ok(())
@@ -340,7 +340,7 @@ fn run_one(
 
 fn print_summary(report: &CampaignReport, out: &Path) {
     let t = &report.totals;
-    let pct = |r: &crate::campaign::table::Rate| {
+    let pct = |r: &scarp::campaign::table::Rate| {
         r.rate
             .map_or("–".to_string(), |x| format!("{:.0}%", 100.0 * x))
     };
@@ -354,7 +354,7 @@ fn print_summary(report: &CampaignReport, out: &Path) {
         pct(&t.alpha_error_within_2deg),
         pct(&t.runs_without_collision),
         pct(&t.truth_in_interval),
-        out.join(crate::campaign::CAMPAIGN_MD).display()
+        out.join(scarp::campaign::CAMPAIGN_MD).display()
     );
 }
 

@@ -55,8 +55,8 @@ use scarp_slam::meshing::{MeshingConfig, extract_mesh, remove_small_components};
 use scarp_slam::tsdf::{Roi, TsdfConfig, TsdfVolume};
 use serde::Deserialize;
 
-use crate::evaluation::mesh::{MeshEvalConfig, evaluate_mesh};
-use crate::evaluation::trajectory::{TrajectoryEvalConfig, evaluate_trajectory, umeyama};
+use scarp::evaluation::mesh::{MeshEvalConfig, evaluate_mesh};
+use scarp::evaluation::trajectory::{TrajectoryEvalConfig, evaluate_trajectory, umeyama};
 
 /// Which poses to fuse with.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]

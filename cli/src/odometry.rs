@@ -15,7 +15,7 @@ use scarp_slam::keyframes::{KeyframeConfig, KeyframeSelector};
 use scarp_slam::odometry::{OdometryConfig, SourceFrame, TrackingReference, frame_pyramid, track};
 use serde::Serialize;
 
-use crate::evaluation::trajectory::{TrajectoryEvalConfig, TrajectoryMetrics, evaluate_trajectory};
+use scarp::evaluation::trajectory::{TrajectoryEvalConfig, TrajectoryMetrics, evaluate_trajectory};
 
 /// Track a sequence frame-to-frame (or frame-to-keyframe) and write `DIR/trajectory.txt`.
 #[derive(Debug, Args)]

@@ -1,6 +1,6 @@
 //! `scarp localize`: run detection, tracking and the depth filter over a sequence and write
 //! each target's point set, ellipsoid and status. It runs the mission's perception path
-//! ([`crate::mission::perception::Perception`]) with the mission's default detector, tracker and
+//! ([`scarp::mission::perception::Perception`]) with the mission's default detector, tracker and
 //! box-filter settings.
 
 use std::path::{Path, PathBuf};
@@ -15,13 +15,13 @@ use scarp_export::ply::{PlyEncoding, write_point_cloud};
 use scarp_slam::PointCloud;
 use serde::Serialize;
 
-use crate::detection::simulated::roles_from_boxes;
-use crate::detection::{BoundingBox, Detection, Detector, ReplayDetector};
-use crate::evaluation::mesh::MeshDistance;
-use crate::localization::{LocalizationConfig, Target, TargetStatus};
-use crate::mission::config::MissionConfig;
-use crate::mission::evaluation::{EstimatorErrorByTarget, estimate_frame_error_m};
-use crate::mission::perception::{BoxSource, Perception, mission_detector};
+use scarp::detection::simulated::roles_from_boxes;
+use scarp::detection::{BoundingBox, Detection, Detector, ReplayDetector};
+use scarp::evaluation::mesh::MeshDistance;
+use scarp::localization::{LocalizationConfig, Target, TargetStatus};
+use scarp::mission::config::MissionConfig;
+use scarp::mission::evaluation::{EstimatorErrorByTarget, estimate_frame_error_m};
+use scarp::mission::perception::{BoxSource, Perception, mission_detector};
 
 /// Localize targets in a sequence with the bounding-box depth filter.
 #[derive(Debug, Args)]
@@ -76,7 +76,7 @@ pub struct LocalizeArgs {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum DetectorKind {
-    /// [`crate::detection::simulated::SimulatedDetector`] with the mission's default
+    /// [`scarp::detection::simulated::SimulatedDetector`] with the mission's default
     /// configuration, seeded from `--seed`, on the sequence's instance masks; the roles of the
     /// rocks come from `boxes.txt`.
     Simulated,

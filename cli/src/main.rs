@@ -1,20 +1,22 @@
-//! The `scarp` command line: one module per subcommand, each with its own clap `Args` struct and a
-//! `run` function.
-
-pub mod ba;
-pub mod campaign;
-pub mod config;
-pub mod eval;
-pub mod fragility;
-pub mod localize;
-pub mod map;
-pub mod odometry;
-pub mod plan;
-pub mod process;
-pub mod render;
-pub mod simulate;
-pub mod track;
-pub mod world;
+//! The `scarp` command-line tool: one module per subcommand, each with its own clap `Args`
+//! struct and a `run` function over the `scarp` library. Run `scarp --help` for the subcommands.
+//!
+//! This crate alone pulls clap, indicatif, ctrlc and the tracing subscriber; the library crates
+//! take no command-line types.
+mod ba;
+mod campaign;
+mod config;
+mod eval;
+mod fragility;
+mod localize;
+mod map;
+mod odometry;
+mod plan;
+mod process;
+mod render;
+mod simulate;
+mod track;
+mod world;
 
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -130,4 +132,15 @@ fn init_logging(level: &str) {
         .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .with_writer(std::io::stderr)
         .try_init();
+}
+
+fn main() -> std::process::ExitCode {
+    let cli = Cli::parse();
+    match run(cli) {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(error) => {
+            eprintln!("error: {error:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
 }

@@ -191,7 +191,7 @@ fn plan_flies_the_mapping_rings_of_a_target() {
 #[test]
 fn ba_solves_the_shrunk_bal_problem_and_prints_json() {
     let file = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("slam/tests/data/bal-ladybug-problem-49-7776-pre-shrink-1800.txt");
+        .join("../slam/tests/data/bal-ladybug-problem-49-7776-pre-shrink-1800.txt");
     let out = scarp_ok(&["ba", path_str(&file), "--threads", "2", "--json"]);
     let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(json["cameras"], 49);

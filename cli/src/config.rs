@@ -13,7 +13,7 @@ pub struct ConfigArgs {}
 pub fn defaults_toml() -> anyhow::Result<String> {
     Ok(format!(
         "# scarp defaults: every tunable, with the value used when a configuration omits it.\n# Save as mission.toml, keep what you change, and run `scarp simulate --config mission.toml`.\n{}",
-        toml::to_string_pretty(&crate::mission::config::MissionConfig::default())?
+        toml::to_string_pretty(&scarp::mission::config::MissionConfig::default())?
     ))
 }
 
@@ -49,19 +49,19 @@ mod tests {
             value["sensor"].clone().try_into().unwrap();
         assert_eq!(sensor, scarp_datasets::sensor::SensorConfig::default());
         assert_eq!(value["sensor"]["baseline_m"].as_float(), Some(0.12));
-        let simulated: crate::detection::SimulatedDetectorConfig =
+        let simulated: scarp::detection::SimulatedDetectorConfig =
             value["detection"]["simulated"].clone().try_into().unwrap();
         assert_eq!(
             simulated,
-            crate::detection::SimulatedDetectorConfig::default()
+            scarp::detection::SimulatedDetectorConfig::default()
         );
-        let localization: crate::localization::LocalizationConfig =
+        let localization: scarp::localization::LocalizationConfig =
             value["localization"].clone().try_into().unwrap();
         assert_eq!(
             localization,
-            crate::localization::LocalizationConfig::default()
+            scarp::localization::LocalizationConfig::default()
         );
-        let tracker: crate::tracking::TrackerConfig = value["tracker"].clone().try_into().unwrap();
-        assert_eq!(tracker, crate::tracking::TrackerConfig::default());
+        let tracker: scarp::tracking::TrackerConfig = value["tracker"].clone().try_into().unwrap();
+        assert_eq!(tracker, scarp::tracking::TrackerConfig::default());
     }
 }

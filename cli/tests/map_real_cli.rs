@@ -18,8 +18,8 @@ use std::path::PathBuf;
 use common::{read_json, scarp_stdout as scarp};
 
 fn redkitchen() -> Option<PathBuf> {
-    let dir =
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data/real/7scenes_redkitchen_50");
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../shared/data/real/7scenes_redkitchen_50");
     if dir.join("rgb.txt").is_file() {
         Some(dir)
     } else {

@@ -1,12 +1,12 @@
-//! `scarp fragility`: fragility analysis of a rock mesh (see [`crate::fragility`]).
+//! `scarp fragility`: fragility analysis of a rock mesh (see [`scarp::fragility`]).
 
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use scarp_slam::TriangleMesh;
 
-use crate::fragility::scan::{analyze_closed_scan, close_scan};
-use crate::fragility::{
+use scarp::fragility::scan::{analyze_closed_scan, close_scan};
+use scarp::fragility::{
     ContactSpec, FragilityConfig, FragilityReport, analyze_detailed, figure::write_figure,
 };
 
@@ -143,7 +143,7 @@ pub fn summary(report: &FragilityReport) -> String {
 /// Unreadable or invalid meshes or config, analysis failures (named by [`FragilityError`]) and
 /// figure write errors, each with the path at fault.
 ///
-/// [`FragilityError`]: crate::fragility::FragilityError
+/// [`FragilityError`]: scarp::fragility::FragilityError
 pub fn run(args: FragilityArgs) -> anyhow::Result<()> {
     let config = load_config(&args)?;
     let mesh = read_mesh(&args.mesh)?;
@@ -193,7 +193,7 @@ mod tests {
         assert_eq!(parse_vector("0, 0,1").unwrap(), [0.0, 0.0, 1.0]);
         assert!(parse_vector("0,1").is_err());
         assert!(parse_vector("a,b,c").is_err());
-        let cli = crate::cli::Cli::try_parse_from([
+        let cli = crate::Cli::try_parse_from([
             "scarp",
             "fragility",
             "rock.obj",
@@ -204,14 +204,14 @@ mod tests {
             "--json",
         ])
         .unwrap();
-        let crate::cli::Command::Fragility(args) = cli.command else {
+        let crate::Command::Fragility(args) = cli.command else {
             panic!("parsed as another subcommand");
         };
         assert_eq!(args.up, Some([0.0, 0.0, -1.0]));
         assert_eq!(args.contact_height, Some(-0.25));
         assert!(args.json);
         assert!(
-            crate::cli::Cli::try_parse_from([
+            crate::Cli::try_parse_from([
                 "scarp",
                 "fragility",
                 "r.obj",
@@ -289,7 +289,7 @@ mod tests {
         let figure = dir.path().join("rock.png");
         let args = FragilityArgs {
             mesh: Path::new(env!("CARGO_MANIFEST_DIR"))
-                .join("../shared/data/rocks/double_rock.ply"),
+                .join("../../shared/data/rocks/double_rock.ply"),
             up: Some([0.0, 0.0, 1.0]),
             contact_height: Some(-0.06),
             pedestal: None,
