@@ -37,7 +37,8 @@ pub struct MissionConfig {
     /// paper's behaviour), which lost rock 1 of the default world once, its KL hovering just
     /// above the threshold.
     pub map_unconverged_targets: bool,
-    /// Target detectors (the mission flies the simulated one).
+    /// Target detectors: which one the perception runs (simulated by default, or an ONNX
+    /// model) and their tunables.
     pub detection: DetectionConfig,
     /// The target cylinder from the converged point set.
     pub cylinder: CylinderEstimateConfig,
@@ -156,10 +157,26 @@ pub struct MissionConfigError {
     pub reason: String,
 }
 
-/// The detectors' tunables.
+/// Which detector the mission's perception runs.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum DetectorKind {
+    /// The modelled detector: boxes from the rendered instance masks, with the jitter, misses
+    /// and false positives of [`crate::detection::SimulatedDetectorConfig`]. The default.
+    #[default]
+    Simulated,
+    /// A YOLO v5/v8 ONNX export (`onnx_model`), run with tract; needs the `onnx` cargo feature.
+    Onnx,
+}
+
+/// The detectors' tunables, and which one the mission runs.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct DetectionConfig {
+    /// The detector of the mission's perception. Default `simulated`.
+    pub detector: DetectorKind,
+    /// The ONNX model file for `detector = "onnx"` (a path relative to the working directory).
+    pub onnx_model: Option<std::path::PathBuf>,
     /// The modelled detector of synthetic sequences (its seed is derived from the mission's).
     pub simulated: crate::detection::SimulatedDetectorConfig,
     /// The ONNX YOLO detector (cargo feature `onnx`).

@@ -17,8 +17,8 @@ use scarp_datasets::world::World;
 use scarp_slam::image::gray_from_rgb;
 use scarp_slam::{PinholeCamera, RgbdFrame};
 
-use super::config::MissionConfig;
-use super::error::MissionResult;
+use super::config::{DetectionConfig, DetectorKind, MissionConfig};
+use super::error::{MissionError, MissionResult};
 use crate::detection::simulated::{
     RoleMap, SimulatedDetector, SimulatedDetectorConfig, roles_from_world,
 };
@@ -218,9 +218,57 @@ pub fn mission_detector(
     )
 }
 
+/// The detector that `config.detector` names: the simulated one (as [`mission_detector`]) or
+/// the ONNX model `config.onnx_model`.
+///
+/// # Errors
+/// [`MissionError::Config`] for `onnx` without a model or in a build without the `onnx`
+/// feature; the detector's own error for invalid settings or an unreadable model.
+pub fn configured_detector(
+    config: &DetectionConfig,
+    roles: RoleMap,
+    seed: u64,
+) -> MissionResult<Box<dyn Detector>> {
+    match config.detector {
+        DetectorKind::Simulated => Ok(Box::new(mission_detector(&config.simulated, roles, seed)?)),
+        DetectorKind::Onnx => {
+            let model = config.onnx_model.as_ref().ok_or_else(|| {
+                MissionError::Config(
+                    "detection.detector = \"onnx\" needs detection.onnx_model (the model file)"
+                        .into(),
+                )
+            })?;
+            onnx_detector(model, &config.onnx)
+        }
+    }
+}
+
+#[cfg(feature = "onnx")]
+fn onnx_detector(
+    model: &std::path::Path,
+    config: &crate::detection::OnnxDetectorConfig,
+) -> MissionResult<Box<dyn Detector>> {
+    use super::error::Context;
+    let detector = crate::detection::OnnxDetector::load(model, config.clone())
+        .with_context(|| format!("loading the ONNX model {}", model.display()))?;
+    Ok(Box::new(detector))
+}
+
+#[cfg(not(feature = "onnx"))]
+fn onnx_detector(
+    model: &std::path::Path,
+    _config: &crate::detection::OnnxDetectorConfig,
+) -> MissionResult<Box<dyn Detector>> {
+    Err(MissionError::Config(format!(
+        "detection.detector = \"onnx\" ({}): this scarp was built without the `onnx` cargo \
+         feature (rebuild with `--features onnx`)",
+        model.display()
+    )))
+}
+
 impl Perception {
-    /// The simulated detector for `world`'s rocks, a fresh tracker and an empty catalog, with the
-    /// mission's settings.
+    /// The detector of `config.detection` (by default the simulated one for `world`'s rocks), a
+    /// fresh tracker and an empty catalog, with the mission's settings.
     ///
     /// # Errors
     /// Invalid detector, tracker or localization settings.
@@ -235,7 +283,7 @@ impl Perception {
     /// Invalid detector, tracker or localization settings.
     pub fn with_roles(roles: RoleMap, config: &MissionConfig, seed: u64) -> MissionResult<Self> {
         Self::with_detector(
-            Box::new(mission_detector(&config.detection.simulated, roles, seed)?),
+            configured_detector(&config.detection, roles, seed)?,
             config.tracker.clone(),
             BoxSource::UpdatedTracks,
             config.localization,
@@ -432,6 +480,31 @@ mod tests {
     use nalgebra::{Point2, Vector3};
     use scarp_slam::geometry::look_at;
     use scarp_slam::image::DepthImage;
+
+    #[test]
+    fn the_detector_is_chosen_by_config() {
+        let config: MissionConfig =
+            toml::from_str("[detection]\ndetector = \"simulated\"").unwrap();
+        assert!(configured_detector(&config.detection, RoleMap::default(), 1).is_ok());
+        // An ONNX detector without its model is a config error naming the key.
+        let config: MissionConfig = toml::from_str("[detection]\ndetector = \"onnx\"").unwrap();
+        let error = configured_detector(&config.detection, RoleMap::default(), 1)
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(error.contains("detection.onnx_model"), "{error}");
+        // A model that does not exist: the feature's absence, or the unreadable file, is named.
+        let config: MissionConfig = toml::from_str(
+            "[detection]\ndetector = \"onnx\"\nonnx_model = \"/nonexistent/yolo.onnx\"",
+        )
+        .unwrap();
+        let error = configured_detector(&config.detection, RoleMap::default(), 1)
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(error.contains("/nonexistent/yolo.onnx"), "{error}");
+        assert!(toml::from_str::<MissionConfig>("[detection]\ndetector = \"yolo\"").is_err());
+    }
 
     /// z-depth of a sphere standing on the ground plane z = 0, ray-cast from `pose`.
     fn sphere_on_ground(
