@@ -9,8 +9,8 @@
 //!   warped refinement pass.
 //! - `rendered_lawnmower`: the first frames of the default world's lawn-mower survey (20 m
 //!   altitude, 80° HFOV, 2000-frame sweep as `scarp render --path lawnmower`), rendered, with
-//!   eight 36–50 px boxes spread over the frame, and the default tracker config (the `scarp`
-//!   preset: no refinement pass), then the same with one warped refinement pass re-tracked
+//!   eight 36–50 px boxes spread over the frame, and the default tracker config (the `paper`
+//!   preset; no refinement pass), then the same with one warped refinement pass re-tracked
 //!   through the pyramid (`_refinement_pass`) or refined from the first pass on the
 //!   full-resolution level (`_refine_from_previous_pass`).
 //!

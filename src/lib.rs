@@ -9,18 +9,16 @@
 //!
 //! ## Example
 //!
-//! The mission's box tracker, with its defaults (the `scarp` preset, matched to the simulated
-//! detector's σ 4 px box jitter), confirms a rock detected on three frames in a row; a
-//! detection scored below the preset's 0.6 floor starts nothing.
+//! The mission's box tracker, with the `scarp` preset (matched to the simulated detector's
+//! σ 4 px box jitter), confirms a rock detected on three frames in a row; a detection scored
+//! below the preset's 0.6 floor starts nothing.
 //!
 //! ```
 //! use scarp::detection::{BoundingBox, Detection};
 //! use scarp::tracking::{Tracker, TrackerConfig, TrackerPreset};
 //! use scarp_slam::image::GrayImage;
 //!
-//! let config = TrackerConfig::default();
-//! assert_eq!(config.preset, TrackerPreset::Scarp);
-//! let mut tracker = Tracker::new(config)?;
+//! let mut tracker = Tracker::new(TrackerConfig::preset(TrackerPreset::Scarp))?;
 //! let frame = GrayImage::filled(320, 240, 0.5);
 //! let rock = Detection {
 //!     bbox: BoundingBox::new(100.0, 80.0, 150.0, 130.0)?,
