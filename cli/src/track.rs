@@ -124,27 +124,13 @@ fn make_detector(
         return Ok(Box::new(detector));
     }
     if let Some(model) = name.strip_prefix("onnx:") {
-        return onnx_detector(Path::new(model), config);
+        return scarp::detection::load_onnx_detector(
+            Path::new(model),
+            config.onnx_detector.clone(),
+        )
+        .with_context(|| format!("--detector onnx:{model}"));
     }
     bail!("--detector must be `simulated` or `onnx:MODEL`, got `{name}`")
-}
-
-/// The YOLO ONNX detector of `model`.
-#[cfg(feature = "onnx")]
-fn onnx_detector(model: &Path, config: &TrackConfig) -> anyhow::Result<Box<dyn Detector>> {
-    let detector = scarp::detection::OnnxDetector::load(model, config.onnx_detector.clone())
-        .with_context(|| format!("loading ONNX model {}", model.display()))?;
-    Ok(Box::new(detector))
-}
-
-/// Without the `onnx` feature: a clear error.
-#[cfg(not(feature = "onnx"))]
-fn onnx_detector(model: &Path, _config: &TrackConfig) -> anyhow::Result<Box<dyn Detector>> {
-    bail!(
-        "--detector onnx:{}: this scarp was built without the `onnx` cargo feature \
-         (rebuild with `--features onnx`)",
-        model.display()
-    )
 }
 
 /// Groups `boxes.txt` by frame time: the boxes whose timestamp is within 1 ms of `t`.

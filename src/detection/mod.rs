@@ -24,6 +24,32 @@ pub use yolo::{OnnxDetectorConfig, YoloLayout};
 
 use scarp_slam::frame::RgbdFrame;
 
+/// The YOLO ONNX detector of the model file `model`, boxed for the tracker and the mission.
+///
+/// # Errors
+/// [`DetectionError::Model`] naming the file when it cannot be loaded, or when this build lacks
+/// the `onnx` cargo feature (the message says how to rebuild); [`DetectionError::Config`] for
+/// invalid settings.
+pub fn load_onnx_detector(
+    model: &std::path::Path,
+    config: OnnxDetectorConfig,
+) -> Result<Box<dyn Detector>, DetectionError> {
+    #[cfg(feature = "onnx")]
+    {
+        Ok(Box::new(OnnxDetector::load(model, config)?))
+    }
+    #[cfg(not(feature = "onnx"))]
+    {
+        let _ = config;
+        Err(DetectionError::Model {
+            path: model.display().to_string(),
+            reason: "this scarp was built without the `onnx` cargo feature (rebuild with \
+                     `--features onnx`)"
+                .into(),
+        })
+    }
+}
+
 /// An axis-aligned image box, pixels (column `x`, row `y`), continuous coordinates.
 ///
 /// Invariant for a valid box: all four values are finite and `x_min < x_max`, `y_min < y_max`.

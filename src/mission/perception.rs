@@ -222,8 +222,8 @@ pub fn mission_detector(
 /// the ONNX model `config.onnx_model`.
 ///
 /// # Errors
-/// [`MissionError::Config`] for `onnx` without a model or in a build without the `onnx`
-/// feature; the detector's own error for invalid settings or an unreadable model.
+/// [`MissionError::Config`] for `onnx` without a model; the detector's own error for invalid
+/// settings, an unreadable model or a build without the `onnx` feature.
 pub fn configured_detector(
     config: &DetectionConfig,
     roles: RoleMap,
@@ -238,32 +238,12 @@ pub fn configured_detector(
                         .into(),
                 )
             })?;
-            onnx_detector(model, &config.onnx)
+            Ok(crate::detection::load_onnx_detector(
+                model,
+                config.onnx.clone(),
+            )?)
         }
     }
-}
-
-#[cfg(feature = "onnx")]
-fn onnx_detector(
-    model: &std::path::Path,
-    config: &crate::detection::OnnxDetectorConfig,
-) -> MissionResult<Box<dyn Detector>> {
-    use super::error::Context;
-    let detector = crate::detection::OnnxDetector::load(model, config.clone())
-        .with_context(|| format!("loading the ONNX model {}", model.display()))?;
-    Ok(Box::new(detector))
-}
-
-#[cfg(not(feature = "onnx"))]
-fn onnx_detector(
-    model: &std::path::Path,
-    _config: &crate::detection::OnnxDetectorConfig,
-) -> MissionResult<Box<dyn Detector>> {
-    Err(MissionError::Config(format!(
-        "detection.detector = \"onnx\" ({}): this scarp was built without the `onnx` cargo \
-         feature (rebuild with `--features onnx`)",
-        model.display()
-    )))
 }
 
 impl Perception {
