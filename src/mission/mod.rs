@@ -6,7 +6,11 @@
 //! - [`mode`]: the modes and the flight log.
 //! - [`mount`]: the camera mount's pitch servo (γ for search, nearly level on the base ring).
 //! - [`catalog`]: the mission's targets and their status.
+//! - [`sensors`]: the sensor seam: camera frames with their pose estimate and time, from the
+//!   simulated vehicle ([`sensors::Simulated`]) or a recorded flight ([`sensors::Recorded`]).
 //! - [`simulation`]: the simulation loop and the state machine.
+//! - [`offline`]: the catalog of a recorded flight (`scarp process`).
+//! - [`record`]: the flight as sensed (`scarp simulate --record`).
 //! - [`perception`]: detect → track → localize during Search and FineLocalize.
 //! - [`mapping`]: Map mode for one target, then bundle adjustment, mesh, fragility, export.
 //! - [`coverage`]: the cylinder-coverage test that ends mapping.
@@ -32,4 +36,5 @@ pub mod record;
 pub mod report;
 pub mod report_viewer;
 pub mod safety;
+pub mod sensors;
 pub mod simulation;

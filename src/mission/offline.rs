@@ -29,12 +29,11 @@
 //!    and 1 mm depth PNGs can move a coverage right at the threshold by a cell).
 
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
-use super::error::{Context, MissionError, MissionResult};
-use nalgebra::{Isometry3, Point3};
-use scarp_datasets::sequence::Sequence;
+use super::error::{Context, MissionResult};
+use nalgebra::Point3;
 use scarp_datasets::world::World;
 use scarp_slam::PinholeCamera;
 
@@ -48,6 +47,7 @@ use super::mode::{FlightLogEntry, Mode};
 use super::perception::{Perception, TargetState};
 use super::record::FlightOrigin;
 use super::report::{MissionReport, ModeChange, StageTimings};
+use super::sensors::{Recorded, Sensors};
 use super::simulation::ground_height_near;
 use crate::detection::simulated::roles_from_boxes;
 
@@ -66,46 +66,6 @@ pub struct ProcessInputs<'a> {
     pub seed: u64,
 }
 
-/// One line of `flight.txt`: the mode at a frame.
-fn read_flight_log(path: &Path) -> MissionResult<Option<BTreeMap<u64, Mode>>> {
-    if !path.exists() {
-        return Ok(None);
-    }
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    let mut modes = BTreeMap::new();
-    for (number, line) in text.lines().enumerate() {
-        let line = line.trim();
-        if line.is_empty() || line.starts_with('#') {
-            continue;
-        }
-        let fields: Vec<&str> = line.split_whitespace().collect();
-        let bad = || {
-            MissionError::invalid(format!(
-                "{}:{}: expected `timestamp_s mount_pitch_down_deg mode target`, got `{line}`",
-                path.display(),
-                number + 1
-            ))
-        };
-        let [t, _, mode, target] = fields[..] else {
-            return Err(bad());
-        };
-        let t: f64 = t.parse().map_err(|_| bad())?;
-        let target = match target {
-            "-" => None,
-            id => Some(id.parse::<u32>().map_err(|_| bad())?),
-        };
-        let mode = Mode::parse(mode, target).ok_or_else(bad)?;
-        modes.insert(time_key(t), mode);
-    }
-    Ok(Some(modes))
-}
-
-/// A timestamp as a map key, to the microsecond the lists are written with.
-fn time_key(t: f64) -> u64 {
-    (t * 1e6).round() as u64
-}
-
 /// Processes a recorded flight into a rock catalog (see the [module docs](self)).
 ///
 /// # Errors
@@ -115,50 +75,19 @@ fn time_key(t: f64) -> u64 {
 pub fn process_flight(inputs: &ProcessInputs<'_>) -> MissionResult<MissionReport> {
     let started = Instant::now();
     let config = &inputs.config;
-    let seq = Sequence::open(&inputs.flight)
-        .with_context(|| format!("opening the flight {}", inputs.flight.display()))?;
-    if seq.is_empty() {
-        return Err(MissionError::invalid(format!(
-            "{}: the flight has no frames",
-            inputs.flight.display()
-        )));
-    }
-    let camera = seq.camera;
-    let estimates: Vec<Isometry3<f64>> = seq
-        .entries
-        .iter()
-        .enumerate()
-        .map(|(i, e)| {
-            e.world_from_camera_estimate.with_context(|| {
-                format!(
-                    "{}: frame {i} (t = {:.6} s) has no pose in estimate.txt",
-                    inputs.flight.display(),
-                    e.timestamp_s
-                )
-            })
-        })
-        .collect::<MissionResult<_>>()?;
-    let modes = read_flight_log(&inputs.flight.join("flight.txt"))?;
-    let mode_at = |t: f64| {
-        modes
-            .as_ref()
-            .and_then(|m| m.get(&time_key(t)).copied())
-            .unwrap_or(Mode::Search)
-    };
-    let origin_path = inputs.flight.join("origin.toml");
-    let origin = if origin_path.exists() {
-        FlightOrigin::read(&origin_path)?
-    } else {
+    let mut flight = Recorded::open(&inputs.flight)?;
+    let camera = *flight.camera();
+    let origin = flight.origin()?.unwrap_or_else(|| {
         tracing::warn!(
-            "{} is missing: targets.geojson places the ENU origin at 0°N 0°E",
-            origin_path.display()
+            "{} has no origin.toml: targets.geojson places the ENU origin at 0°N 0°E",
+            inputs.flight.display()
         );
         FlightOrigin {
             lat_deg: 0.0,
             lon_deg: 0.0,
             alt_m: 0.0,
         }
-    };
+    });
     std::fs::create_dir_all(&inputs.out)
         .with_context(|| format!("creating {}", inputs.out.display()))?;
 
@@ -174,7 +103,11 @@ pub fn process_flight(inputs: &ProcessInputs<'_>) -> MissionResult<MissionReport
     };
 
     // 1. Search detection and localization.
-    let mut perception = Perception::with_roles(roles_from_boxes(&seq.boxes), config, inputs.seed)?;
+    let mut perception = Perception::with_roles(
+        roles_from_boxes(&flight.sequence().boxes),
+        config,
+        inputs.seed,
+    )?;
     let search_period_s = 1.0 / config.search_camera_rate_hz;
     let mut last_perceived: Option<f64> = None;
     let mut previous_mode = Mode::Search;
@@ -185,14 +118,19 @@ pub fn process_flight(inputs: &ProcessInputs<'_>) -> MissionResult<MissionReport
     let mut last_fine_frame: Option<usize> = None;
     // With a flight log: the targets it mapped, in order, as they were when mapping began.
     let mut mapped_live: Vec<MapPlan> = Vec::new();
-    let mut log = Vec::with_capacity(seq.len());
-    for (index, entry) in seq.entries.iter().enumerate() {
-        let t = entry.timestamp_s;
-        let mode = mode_at(t);
+    let mut log = Vec::with_capacity(flight.len());
+    let has_flight_log = flight.has_flight_log();
+    while let Some(pose) = flight.next_pose()? {
+        let index = flight
+            .index()
+            .context("a recorded frame without an index")?;
+        let t = pose.timestamp_s;
+        let estimate = pose.world_from_camera_estimate;
+        let mode = flight.mode();
         log.push(FlightLogEntry {
             time_s: t,
             world_from_camera_truth: None,
-            world_from_camera_estimate: estimates[index],
+            world_from_camera_estimate: estimate,
             mode,
         });
         if let Mode::Map(id) = mode
@@ -219,10 +157,10 @@ pub fn process_flight(inputs: &ProcessInputs<'_>) -> MissionResult<MissionReport
             Mode::Map(_) => report.frames_map += 1,
             Mode::Done => {}
         }
-        let perceives = match (&modes, mode) {
-            (Some(_), Mode::Search | Mode::FineLocalize(_)) => true,
-            (Some(_), _) => false,
-            (None, _) => last_perceived.is_none_or(|last| t - last >= search_period_s - 1e-6),
+        let perceives = match (has_flight_log, mode) {
+            (true, Mode::Search | Mode::FineLocalize(_)) => true,
+            (true, _) => false,
+            (false, _) => last_perceived.is_none_or(|last| t - last >= search_period_s - 1e-6),
         };
         // The live mission resets the box tracks whenever it returns to the search.
         if previous_mode != Mode::Search && mode == Mode::Search {
@@ -237,9 +175,9 @@ pub fn process_flight(inputs: &ProcessInputs<'_>) -> MissionResult<MissionReport
             last_fine_frame = Some(index);
         }
         let clock = Instant::now();
-        let frame = seq.load_frame(index)?;
+        let frame = flight.images()?;
         timings.render_s += clock.elapsed().as_secs_f64();
-        let step = perception.process(&frame, &camera, &estimates[index])?;
+        let step = perception.process(&frame, &camera, &estimate)?;
         timings.detect_s += step.detect_s;
         timings.track_s += step.track_s;
         timings.localize_s += step.localize_s;
@@ -253,12 +191,11 @@ pub fn process_flight(inputs: &ProcessInputs<'_>) -> MissionResult<MissionReport
             last_update_frame.insert(*id, index);
         }
     }
-    report.sim_time_s = seq.entries.last().map_or(0.0, |e| e.timestamp_s)
-        - seq.entries.first().map_or(0.0, |e| e.timestamp_s);
+    report.sim_time_s = flight.duration_s();
 
     // 2. Targets.
     let mut catalog = Catalog::new();
-    let plans: Vec<MapPlan> = if modes.is_some() {
+    let plans: Vec<MapPlan> = if has_flight_log {
         mapped_live
     } else {
         let mut chosen: Vec<MapPlan> = Vec::new();
@@ -306,7 +243,7 @@ pub fn process_flight(inputs: &ProcessInputs<'_>) -> MissionResult<MissionReport
     let mut sessions: Vec<(MappingSession, usize, Option<u32>)> = Vec::new();
     for plan in &plans {
         let state = &plan.state;
-        let cylinder = target_cylinder(&seq, &camera, plan, config)?;
+        let cylinder = target_cylinder(&flight, &camera, plan, config)?;
         if let Some(target) = catalog.get_mut(&state.id) {
             let r = &mut target.report;
             r.cylinder_center_xy = [cylinder.center_x_m, cylinder.center_y_m];
@@ -324,8 +261,13 @@ pub fn process_flight(inputs: &ProcessInputs<'_>) -> MissionResult<MissionReport
     }
     if !sessions.is_empty() {
         let bar_clock = Instant::now();
-        for (index, estimate) in estimates.iter().enumerate() {
-            let mode = log[index].mode;
+        flight.rewind();
+        while let Some(pose) = flight.next_pose()? {
+            let index = flight
+                .index()
+                .context("a recorded frame without an index")?;
+            let estimate = &pose.world_from_camera_estimate;
+            let mode = flight.mode();
             let wanted: Vec<usize> = (0..sessions.len())
                 .filter(|&k| {
                     let (session, _, only) = &sessions[k];
@@ -336,7 +278,7 @@ pub fn process_flight(inputs: &ProcessInputs<'_>) -> MissionResult<MissionReport
                 continue;
             }
             let clock = Instant::now();
-            let frame = seq.load_frame(index)?;
+            let frame = flight.images()?;
             timings.render_s += clock.elapsed().as_secs_f64();
             for k in wanted {
                 let (session, attempts, _) = &mut sessions[k];
@@ -381,7 +323,7 @@ pub fn process_flight(inputs: &ProcessInputs<'_>) -> MissionResult<MissionReport
         }
         tracing::debug!(
             "mapping pass over {} frames: {:.1} s",
-            seq.len(),
+            flight.len(),
             bar_clock.elapsed().as_secs_f64()
         );
     }
@@ -454,7 +396,7 @@ struct MapPlan {
 /// The mapping cylinder of `plan`'s target, standing on the ground that its ground frame's
 /// depth shows around it (else the lowest of its points).
 fn target_cylinder(
-    seq: &Sequence,
+    flight: &Recorded,
     camera: &PinholeCamera,
     plan: &MapPlan,
     config: &MissionConfig,
@@ -464,8 +406,8 @@ fn target_cylinder(
     let radius = cylinder_radius_m(&state.points, &state.center, c);
     let ground = match plan.ground_frame {
         Some(index) => {
-            let frame = seq.load_frame(index)?;
-            let pose = seq.entries[index].world_from_camera_estimate;
+            let frame = flight.images_at(index)?;
+            let pose = flight.estimate(index).copied();
             pose.and_then(|pose| {
                 ground_height_near(camera, &frame.depth_m, &pose, &state.center, radius)
             })
@@ -480,30 +422,4 @@ fn target_cylinder(
             .fold(state.center.z, f64::min)
     });
     cylinder_around(&state.center, radius, ground, c)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn the_flight_log_is_read_and_bad_lines_are_named() {
-        let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join("flight.txt");
-        assert!(read_flight_log(&path).unwrap().is_none());
-        std::fs::write(
-            &path,
-            "# header\n0.250000 55.0 search -\n0.500000 20.0 map 3\n0.750000 55.0 fine_localize 4\n",
-        )
-        .unwrap();
-        let modes = read_flight_log(&path).unwrap().unwrap();
-        assert_eq!(modes[&time_key(0.25)], Mode::Search);
-        assert_eq!(modes[&time_key(0.5)], Mode::Map(3));
-        assert_eq!(modes[&time_key(0.75)], Mode::FineLocalize(4));
-        std::fs::write(&path, "0.25 55.0 map -\n").unwrap();
-        let err = read_flight_log(&path).unwrap_err().to_string();
-        assert!(err.contains("flight.txt:1"), "{err}");
-        std::fs::write(&path, "0.25 55.0 hover -\n").unwrap();
-        assert!(read_flight_log(&path).is_err());
-    }
 }

@@ -11,9 +11,7 @@ use nalgebra::{Isometry3, Point3, Vector3};
 use rand::rngs::Xoshiro256PlusPlus;
 use rand::{RngExt, SeedableRng};
 use rand_distr::StandardNormal;
-use scarp_datasets::estimator::StateEstimator;
 use scarp_datasets::noise::derive_seed;
-use scarp_datasets::render::Renderer;
 use scarp_datasets::world::World;
 use scarp_export::tum::{StampedPose, write_tum_trajectory};
 use scarp_planning::prelude::{
@@ -34,6 +32,7 @@ use super::perception::Perception;
 use super::record::{FlightOrigin, FlightRecorder};
 use super::report::{MissionReport, ModeChange, StageTimings};
 use super::safety::SafetyLog;
+use super::sensors::{Sensors, Simulated};
 
 /// Frames tried (at the map camera rate: 1 s) to see the target before its map starts anyway
 /// (`Mission::recenter_map_on_first_frame`).
@@ -119,14 +118,11 @@ pub struct Progress {
 /// The running mission: vehicle, sensors, perception, targets and logs.
 pub struct Mission<'a> {
     inputs: MissionInputs<'a>,
-    camera: PinholeCamera,
-    mount: CameraMount,
+    /// The vehicle, its camera mount, state estimator and RGB-D camera.
+    sensors: Simulated<'a>,
     /// The mapping rings being flown: the mount's pitch follows them by height.
     ring_plan: Option<RingPlan>,
-    renderer: Renderer<'a>,
     env: Environment,
-    motion: MotionSystem,
-    estimator: StateEstimator,
     perception: Perception,
     mode: Mode,
     search: SearchProgress,
@@ -135,7 +131,6 @@ pub struct Mission<'a> {
     mapping: Option<MappingSession>,
     log: Vec<FlightLogEntry>,
     report: MissionReport,
-    frame_index: u64,
     /// The flight's true clearance and its collisions.
     safety: SafetyLog,
     /// The safety layer acting on the rangefinder and the depth camera.
@@ -191,7 +186,15 @@ impl<'a> Mission<'a> {
             MotionSystem::new(&config.planning.flight, first.position_m, first.yaw_rad)?;
         motion.follow(&waypoints[1..], &env, &config.planning)?;
         let perception = Perception::new(world, config, inputs.seed)?;
-        let estimator = StateEstimator::new(&config.estimator, derive_seed(inputs.seed, 0x5e57));
+        let sensors = Simulated::new(
+            world,
+            camera,
+            motion,
+            CameraMount::new(cam),
+            config.sensor.clone(),
+            &config.estimator,
+            inputs.seed,
+        );
         let recorder = inputs
             .record
             .as_deref()
@@ -199,13 +202,9 @@ impl<'a> Mission<'a> {
             .transpose()?;
         Ok(Self {
             recorder,
-            camera,
-            mount: CameraMount::new(cam),
+            sensors,
             ring_plan: None,
-            renderer: Renderer::new(world),
             env,
-            motion,
-            estimator,
             perception,
             mode: Mode::Search,
             search: SearchProgress {
@@ -227,7 +226,6 @@ impl<'a> Mission<'a> {
                 }],
                 ..MissionReport::default()
             },
-            frame_index: 0,
             safety: SafetyLog::new(
                 config.collision_radius_m,
                 super::environment::world_obstacles(world)
@@ -255,13 +253,13 @@ impl<'a> Mission<'a> {
 
     /// The camera.
     pub fn camera(&self) -> &PinholeCamera {
-        &self.camera
+        self.sensors.camera()
     }
 
     fn set_mode(&mut self, mode: Mode) {
         tracing::info!(
             "t = {:.1} s: {} → {}{}",
-            self.motion.time_s(),
+            self.sensors.vehicle().time_s(),
             self.mode.as_str(),
             mode.as_str(),
             mode.target()
@@ -269,7 +267,7 @@ impl<'a> Mission<'a> {
         );
         self.mode = mode;
         self.report.modes.push(ModeChange {
-            time_s: self.motion.time_s(),
+            time_s: self.sensors.vehicle().time_s(),
             mode: mode.as_str().into(),
             target: mode.target().map(u64::from),
         });
@@ -305,14 +303,14 @@ impl<'a> Mission<'a> {
             if self.crashed {
                 break "crashed".to_string();
             }
-            if self.motion.time_s() > self.inputs.config.max_sim_time_s {
+            if self.sensors.vehicle().time_s() > self.inputs.config.max_sim_time_s {
                 break "timeout".to_string();
             }
             if let Err(e) = self.step(&mut timings) {
                 break format!("error: {e:#}");
             }
             progress(&Progress {
-                sim_time_s: self.motion.time_s(),
+                sim_time_s: self.sensors.vehicle().time_s(),
                 mode: self.mode,
                 targets_found: self.targets.len(),
                 targets_mapped: self.count(TargetStatus::Mapped),
@@ -329,14 +327,13 @@ impl<'a> Mission<'a> {
 
     /// One camera period: fly, take a frame, act on it.
     fn step(&mut self, timings: &mut StageTimings) -> MissionResult<()> {
-        let t = self.motion.time_s() + self.camera_period_s();
+        let t = self.sensors.vehicle().time_s() + self.camera_period_s();
         let clock = Instant::now();
         // The climb reflex makes the controller believe it is lower than it is.
         let flown = self.navigation_error_m() - Vector3::z() * self.monitor.climb_m();
-        self.motion.advance_to(t, &flown)?;
-        let t = self.motion.time_s();
-        let world_from_body = self.motion.world_from_body();
-        let position = world_from_body.translation.vector;
+        self.sensors.vehicle_mut().advance_to(t, &flown)?;
+        let t = self.sensors.vehicle().time_s();
+        let position = self.sensors.vehicle().world_from_body().translation.vector;
         if let Some(c) = self.env.clearance_at(&position.into())
             && let Some(event) = self.safety.observe(t, self.mode, position.into(), c)
         {
@@ -362,8 +359,14 @@ impl<'a> Mission<'a> {
         timings.flight_s += clock.elapsed().as_secs_f64();
 
         self.slew_mount(t);
-        let truth = world_from_body * self.mount.body_from_camera();
-        let mut estimate = self.estimator.observe(t, &truth);
+        let sensed = self
+            .sensors
+            .next_pose()?
+            .context("the simulated camera stopped")?;
+        let truth = sensed
+            .world_from_camera_truth
+            .context("the simulated camera lost its true pose")?;
+        let mut estimate = sensed.world_from_camera_estimate;
         estimate.translation.vector.z += self.monitor.height_correction_m();
         self.log.push(FlightLogEntry {
             time_s: t,
@@ -372,14 +375,14 @@ impl<'a> Mission<'a> {
             mode: self.mode,
         });
         let clock = Instant::now();
-        let frame = self.take_frame(t, &truth)?;
+        let frame = self.sensors.images()?;
         timings.render_s += clock.elapsed().as_secs_f64();
         if let Some(recorder) = self.recorder.as_mut() {
             recorder.record(
                 &frame,
                 &estimate,
                 &truth,
-                self.mount.pitch_down_deg(),
+                self.sensors.mount_pitch_down_deg(),
                 self.mode,
                 self.inputs.world,
             )?;
@@ -393,7 +396,7 @@ impl<'a> Mission<'a> {
                 self.advance_search_progress();
                 if let Some(id) = self.next_target_to_localize() {
                     self.start_fine_localization(id, timings)?;
-                } else if self.motion.trajectory_done() {
+                } else if self.sensors.vehicle().trajectory_done() {
                     if self.search.next >= self.search.waypoints.len() {
                         self.set_mode(Mode::Done);
                     } else {
@@ -415,7 +418,7 @@ impl<'a> Mission<'a> {
                         self.resume_search(timings)?;
                     }
                     Some(state) if state.converged => self.start_mapping(id, timings)?,
-                    Some(state) if self.motion.trajectory_done() => {
+                    Some(state) if self.sensors.vehicle().trajectory_done() => {
                         if self.inputs.config.map_unconverged_targets
                             && state.ready_for_fine_localization
                         {
@@ -447,7 +450,7 @@ impl<'a> Mission<'a> {
                     None => true,
                 };
                 timings.map_s += clock.elapsed().as_secs_f64();
-                if complete || self.motion.trajectory_done() {
+                if complete || self.sensors.vehicle().trajectory_done() {
                     self.finish_mapping(id, timings)?;
                     self.resume_search(timings)?;
                 }
@@ -465,7 +468,7 @@ impl<'a> Mission<'a> {
         let max_range = config.rangefinder_max_range_m;
         let mut rng = Xoshiro256PlusPlus::seed_from_u64(derive_seed(
             self.inputs.seed ^ 0x7261_6e67_6566,
-            self.frame_index,
+            self.sensors.frames_taken(),
         ));
         let dropped = rng.random::<f64>() < config.rangefinder_dropout_probability;
         let noise_m = config.rangefinder_sigma_m * rng.sample::<f64, _>(StandardNormal);
@@ -478,8 +481,8 @@ impl<'a> Mission<'a> {
                 .map(|r| (r + noise_m).max(0.0)),
             range_expected_m: self
                 .env
-                .range_below(&(truth + self.estimator.position_drift_m()), max_range),
-            nearest_depth_m: nearest_depth_m(&frame.depth_m, &self.camera),
+                .range_below(&(truth + self.sensors.position_drift_m()), max_range),
+            nearest_depth_m: nearest_depth_m(&frame.depth_m, self.sensors.camera()),
         };
         let step = self.monitor.update(t, &senses);
         if step.intervention_started
@@ -509,8 +512,7 @@ impl<'a> Mission<'a> {
             .filter(|_| self.inputs.config.mapping.fly_on_odometry)
             .and_then(MappingSession::navigation_error_m)
             .unwrap_or_else(|| {
-                self.estimator.position_drift_m()
-                    + Vector3::z() * self.monitor.height_correction_m()
+                self.sensors.position_drift_m() + Vector3::z() * self.monitor.height_correction_m()
             })
     }
 
@@ -518,26 +520,14 @@ impl<'a> Mission<'a> {
     /// height, or toward γ outside mapping.
     fn slew_mount(&mut self, t: f64) {
         let camera = &self.inputs.config.planning.camera;
-        let z = self.motion.current_waypoint().position_m.z;
+        let z = self.sensors.vehicle().current_waypoint().position_m.z;
         let target_deg = self
             .ring_plan
             .as_ref()
             .map_or(camera.pitch_down_deg, |plan| {
                 plan.camera_pitch_down_deg_at(z, camera.pitch_down_deg)
             });
-        self.mount.slew_toward(target_deg.to_radians(), t);
-    }
-
-    /// Renders the true view and applies the sensor's noise (seeded per frame).
-    fn take_frame(&mut self, t: f64, truth: &Isometry3<f64>) -> MissionResult<RgbdFrame> {
-        let index = self.frame_index;
-        self.frame_index += 1;
-        let rendered = self.renderer.render(&self.camera, truth)?;
-        let sensor = &self.inputs.config.sensor;
-        let seed = derive_seed(self.inputs.seed, index);
-        let depth = sensor.corrupt_depth(&rendered.depth_m, self.camera.fx, seed);
-        let rgb = sensor.corrupt_rgb(&rendered.rgb, derive_seed(seed, 1));
-        Ok(RgbdFrame::new(t, rgb, depth, Some(rendered.instance))?)
+        self.sensors.slew_mount(target_deg, t);
     }
 
     fn perceive(
@@ -547,7 +537,9 @@ impl<'a> Mission<'a> {
         truth: &Isometry3<f64>,
         timings: &mut StageTimings,
     ) -> MissionResult<()> {
-        let stage = self.perception.process(frame, &self.camera, estimate)?;
+        let stage = self
+            .perception
+            .process(frame, self.sensors.camera(), estimate)?;
         timings.detect_s += stage.detect_s;
         timings.track_s += stage.track_s;
         timings.localize_s += stage.localize_s;
@@ -604,7 +596,7 @@ impl<'a> Mission<'a> {
 
     /// Marks lawn-mower waypoints the reference has reached.
     fn advance_search_progress(&mut self) {
-        let here = self.motion.current_waypoint().position_m;
+        let here = self.sensors.vehicle().current_waypoint().position_m;
         while let Some(w) = self.search.waypoints.get(self.search.next) {
             if (w.position_m - here).norm() < 1.0 {
                 self.search.next += 1;
@@ -655,7 +647,7 @@ impl<'a> Mission<'a> {
         timings: &mut StageTimings,
     ) -> MissionResult<()> {
         if self.resume_point.is_none() {
-            self.resume_point = Some(self.motion.current_waypoint());
+            self.resume_point = Some(self.sensors.vehicle().current_waypoint());
         }
         let Some(state) = self.perception.target_state(id) else {
             return Ok(());
@@ -667,7 +659,7 @@ impl<'a> Mission<'a> {
         let config = &self.inputs.config;
         let plan = plan_fine_localization_clear(
             &state.points,
-            &self.motion.current_waypoint(),
+            &self.sensors.vehicle().current_waypoint(),
             self.search.altitude_m,
             &config.planning.camera,
             &config.planning.fine_localize,
@@ -675,7 +667,8 @@ impl<'a> Mission<'a> {
             &config.planning.clearance,
         );
         let result = plan.map_err(MissionError::from).and_then(|plan| {
-            self.motion
+            self.sensors
+                .vehicle_mut()
                 .follow(&plan.path.waypoints[1..], &self.env, &config.planning)
                 .map_err(MissionError::from)
         });
@@ -708,7 +701,9 @@ impl<'a> Mission<'a> {
         let ground = self
             .last_depth
             .as_ref()
-            .and_then(|(depth, pose)| ground_height_near(&self.camera, depth, pose, center, radius))
+            .and_then(|(depth, pose)| {
+                ground_height_near(self.sensors.camera(), depth, pose, center, radius)
+            })
             .unwrap_or_else(|| self.inputs.world.terrain_height_m(center.x, center.y));
         cylinder_around(center, radius, ground, c)
     }
@@ -745,7 +740,7 @@ impl<'a> Mission<'a> {
         let seen = cylinder_seen_in_frame(
             &mut self.perception,
             frame,
-            &self.camera,
+            self.sensors.camera(),
             estimate,
             &old,
             config.cylinder.max_recenter_m,
@@ -783,14 +778,17 @@ impl<'a> Mission<'a> {
         let config = &self.inputs.config;
         let rings = plan_mapping_rings_clear(
             cylinder,
-            &self.motion.current_waypoint(),
+            &self.sensors.vehicle().current_waypoint(),
             &config.planning.camera,
             &config.planning.mapping,
             &self.env,
             &config.planning.clearance,
         )?;
-        self.motion
-            .follow(&rings.path.waypoints[1..], &self.env, &config.planning)?;
+        self.sensors.vehicle_mut().follow(
+            &rings.path.waypoints[1..],
+            &self.env,
+            &config.planning,
+        )?;
         Ok(rings)
     }
 
@@ -830,7 +828,7 @@ impl<'a> Mission<'a> {
                 self.mapping = Some(MappingSession::new(
                     id,
                     &cylinder,
-                    &self.camera,
+                    self.sensors.camera(),
                     &self.inputs.config,
                 )?);
                 self.set_status(id, TargetStatus::Mapping);
@@ -872,7 +870,7 @@ impl<'a> Mission<'a> {
         let status = mapped_status(outcome, &mut target.report);
         tracing::info!(
             "t = {:.1} s: target {id} {} (coverage {:.2}, {} keyframes, α_min {:?}°)",
-            self.motion.time_s(),
+            self.sensors.vehicle().time_s(),
             status.as_str(),
             target.report.coverage,
             target.report.keyframes,
@@ -897,12 +895,13 @@ impl<'a> Mission<'a> {
             return Ok(());
         }
         // Climb back to the search altitude first, straight up, so the way back is clear.
-        let here = self.motion.current_waypoint();
+        let here = self.sensors.vehicle().current_waypoint();
         let mut climb = here;
         climb.position_m.z = self.search.altitude_m;
         let mut waypoints = vec![climb];
         waypoints.extend(path);
-        self.motion
+        self.sensors
+            .vehicle_mut()
             .follow(&waypoints, &self.env, &config.planning)?;
         timings.planning_s += clock.elapsed().as_secs_f64();
         self.set_mode(Mode::Search);
@@ -939,7 +938,7 @@ impl<'a> Mission<'a> {
                 dir.display()
             );
         }
-        let sim = self.motion.time_s();
+        let sim = self.sensors.vehicle().time_s();
         let wall_s = wall.elapsed().as_secs_f64();
         self.report.sim_time_s = sim;
         self.report.wall_time_s = wall_s;
