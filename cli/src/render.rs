@@ -5,9 +5,7 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::{Args, ValueEnum};
 use nalgebra::{Isometry3, Point3, Vector3};
-use scarp_datasets::estimator::EstimatorConfig;
 use scarp_datasets::paths;
-use scarp_datasets::sensor::SensorConfig;
 use scarp_datasets::sequence::{RenderSettings, SequenceSummary, write_sequence};
 use scarp_datasets::world::World;
 use scarp_export::tum::StampedPose;
@@ -56,6 +54,11 @@ pub struct RenderArgs {
     /// Clean images, and an estimate equal to the ground truth.
     #[arg(long)]
     pub no_noise: bool,
+    /// A mission configuration (TOML, as `scarp simulate --config` takes): its `[sensor]` and
+    /// `[estimator]` tables set the camera's noise and the pose estimate's error (for example
+    /// `[estimator]` with `preset = "rtk"`). Other tables are checked and not used.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
     /// Depth PNG units per metre; default 5000 (TUM) for orbits and files, 1000 for lawn-mower
     /// sweeps, whose depths exceed 13 m.
     #[arg(long)]
@@ -133,11 +136,12 @@ pub fn render_sequence(args: &RenderArgs) -> anyhow::Result<SequenceSummary> {
         depth_scale > 0.0 && depth_scale.is_finite(),
         "--depth-scale must be positive"
     );
+    let config = super::simulate::load_config(args.config.as_ref())?;
     let settings = RenderSettings {
         camera,
         noise: !args.no_noise,
-        sensor: SensorConfig::default(),
-        estimator: EstimatorConfig::default(),
+        sensor: config.sensor,
+        estimator: config.estimator,
         seed: args.seed,
         depth_scale,
     };
@@ -304,6 +308,7 @@ mod tests {
             out: PathBuf::from("unused"),
             seed: 0,
             no_noise: true,
+            config: None,
             depth_scale: None,
             json: false,
         }

@@ -84,6 +84,66 @@ fn render_writes_a_tum_sequence_that_loads() {
     assert!(frame.instance_mask.is_some());
 }
 
+/// `render --config` takes the mission config's `[estimator]`: with every error at zero the
+/// estimate is the truth, while the default GPS estimate is decimetres off; a misspelt key is
+/// refused, naming it.
+#[test]
+fn render_takes_the_estimator_of_a_mission_config() {
+    let dir = temp_dir();
+    let exact = dir.path().join("exact.toml");
+    std::fs::write(
+        &exact,
+        "[estimator]\nhorizontal_sigma_m = 0.0\nvertical_sigma_m = 0.0\n\
+         horizontal_white_m = 0.0\nvertical_white_m = 0.0\n\
+         roll_pitch_sigma_deg = 0.0\nyaw_sigma_deg = 0.0\n",
+    )
+    .unwrap();
+    let worst_estimate_error_m = |config: Option<&Path>| {
+        let seq = dir.path().join("seq");
+        let _ = std::fs::remove_dir_all(&seq);
+        let mut args = vec![
+            "render",
+            "--frames",
+            "3",
+            "--seed",
+            "5",
+            "--out",
+            path_str(&seq),
+        ];
+        if let Some(c) = config {
+            args.extend(["--config", path_str(c)]);
+        }
+        scarp_ok(&args);
+        let sequence = scarp_datasets::sequence::Sequence::open(&seq).unwrap();
+        sequence
+            .entries
+            .iter()
+            .map(|e| {
+                let truth = e.world_from_camera_truth.unwrap().translation.vector;
+                let estimate = e.world_from_camera_estimate.unwrap().translation.vector;
+                (estimate - truth).norm()
+            })
+            .fold(0.0, f64::max)
+    };
+    let exact_m = worst_estimate_error_m(Some(&exact));
+    assert!(exact_m < 1e-6, "exact estimator off by {exact_m} m");
+    let gps_m = worst_estimate_error_m(None);
+    assert!(gps_m > 0.05, "GPS estimator off by only {gps_m} m");
+
+    let typo = dir.path().join("typo.toml");
+    std::fs::write(&typo, "[estimator]\nyaw_sigma_degs = 0.0\n").unwrap();
+    let out = scarp(&[
+        "render",
+        "--config",
+        path_str(&typo),
+        "--out",
+        path_str(&dir.path().join("t")),
+    ]);
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("yaw_sigma_degs"), "{stderr}");
+}
+
 #[test]
 fn bad_input_fails_with_a_message_naming_the_culprit() {
     let dir = temp_dir();

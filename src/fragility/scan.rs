@@ -111,6 +111,14 @@ pub struct ScanConfig {
     /// Default 0.4: in a 3-world × 10-seed campaign, targets patched over 40–50% had a median α
     /// error of 12°, against 1.2° below 40%.
     pub max_filled_fraction: f64,
+    /// The contact polygon must stay at least this far inside the scan's horizontal extent on
+    /// every side, metres, or the scan is refused. A rock's contact lies under the rock, inside
+    /// what the scan holds around it; a contact that reaches the edge of the mapped region is
+    /// the ground that the region cut (the neck search fell through the pedestal to the
+    /// terrain). Default 0.05: on library-a seed 2 the slab on edge (A0, tilted 88°) was cut
+    /// at the terrain, its contact spanned the 3.75 m scan to its east edge, and α_min read
+    /// 47.3° in [42.0°, 53.1°] against a truth of 7.0°.
+    pub min_contact_to_edge_m: f64,
 }
 
 impl Default for ScanConfig {
@@ -133,6 +141,7 @@ impl Default for ScanConfig {
             interval_margin_deg: 1.0,
             contact_edge_m: 0.02,
             max_unseen_support_effect_deg: 5.0,
+            min_contact_to_edge_m: 0.05,
         }
     }
 }
@@ -159,6 +168,7 @@ impl ScanConfig {
             ("scan.profile_near_m", self.profile_near_m),
             ("scan.interval_margin_deg", self.interval_margin_deg),
             ("scan.contact_edge_m", self.contact_edge_m),
+            ("scan.min_contact_to_edge_m", self.min_contact_to_edge_m),
             (
                 "scan.max_unseen_support_effect_deg",
                 self.max_unseen_support_effect_deg,
@@ -884,6 +894,51 @@ fn manifold_faces(faces: &[[u32; 3]]) -> Vec<[u32; 3]> {
         .collect()
 }
 
+/// Refuses a contact polygon (`contact_xy`, world metres) that comes closer than `margin_m` to
+/// the scan's horizontal extent on any side. A rock's contact lies under the rock, inside
+/// whatever the scan holds around it (its overhang, the pedestal, the ground); a contact that
+/// reaches the edge of the mapped region is the ground that the region cut.
+fn check_contact_inside_scan(
+    scan: &TriangleMesh,
+    contact_xy: &[Point2<f64>],
+    margin_m: f64,
+) -> Result<(), FragilityError> {
+    let Some((scan_lo, scan_hi)) = scan.bounds() else {
+        return Ok(());
+    };
+    let fold = |f: fn(f64, f64) -> f64, start: f64, axis: usize| {
+        contact_xy.iter().map(|p| p[axis]).fold(start, f)
+    };
+    let sides = [
+        (
+            "west",
+            fold(f64::min, f64::INFINITY, 0) - f64::from(scan_lo.x),
+        ),
+        (
+            "east",
+            f64::from(scan_hi.x) - fold(f64::max, f64::NEG_INFINITY, 0),
+        ),
+        (
+            "south",
+            fold(f64::min, f64::INFINITY, 1) - f64::from(scan_lo.y),
+        ),
+        (
+            "north",
+            f64::from(scan_hi.y) - fold(f64::max, f64::NEG_INFINITY, 1),
+        ),
+    ];
+    match sides.into_iter().min_by(|a, b| a.1.total_cmp(&b.1)) {
+        Some((side, gap_m)) if gap_m < margin_m => Err(FragilityError::Degenerate(format!(
+            "the contact reaches within {gap_m:.3} m of the mapped region's {side} edge (a \
+             {:.2} × {:.2} m scan): the neck search cut the ground or the pedestal, not the \
+             rock, so the rock's own contact was not found",
+            scan_hi.x - scan_lo.x,
+            scan_hi.y - scan_lo.y,
+        ))),
+        _ => Ok(()),
+    }
+}
+
 /// Closes every boundary loop of `mesh` with a fan around the loop's centroid. Returns the
 /// number of loops closed.
 fn fill_holes(mesh: &mut TriangleMesh) -> usize {
@@ -1025,6 +1080,7 @@ pub fn close_scan(mesh: &TriangleMesh, config: &ScanConfig) -> Result<ClosedScan
         support_outline.as_ref(),
         point_estimate.gaps,
     );
+    check_contact_inside_scan(mesh, &contact_xy, config.min_contact_to_edge_m)?;
     tracing::debug!(
         neck_z,
         plane_z,
@@ -1257,6 +1313,31 @@ mod tests {
         mesh.faces
             .retain(|f| f.iter().any(|&v| mesh.positions[v as usize].z > 1e-6));
         mesh
+    }
+
+    /// A contact inside the scan passes; one that reaches the mapped region's edge (the ground
+    /// cut by the region) is refused, naming the side; the margin is the config's.
+    #[test]
+    fn a_contact_at_the_edge_of_the_scan_is_refused() {
+        let scan = open_scan();
+        let square = |x0: f64, x1: f64| {
+            vec![
+                Point2::new(x0, -0.1),
+                Point2::new(x1, -0.1),
+                Point2::new(x1, 0.1),
+                Point2::new(x0, 0.1),
+            ]
+        };
+        let margin = ScanConfig::default().min_contact_to_edge_m;
+        assert!(check_contact_inside_scan(&scan, &square(-0.14, 0.14), margin).is_ok());
+        // The pedestal's foot is 0.8 m from the axis: a contact reaching 0.78 m is at its edge.
+        let err = check_contact_inside_scan(&scan, &square(-0.1, 0.78), margin)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("east edge"), "{err}");
+        assert!(check_contact_inside_scan(&scan, &square(-0.1, 0.78), 0.01).is_ok());
+        // The scan closes as before: its contact lies well inside.
+        close_scan(&scan, &ScanConfig::default()).unwrap();
     }
 
     #[test]
