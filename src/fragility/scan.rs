@@ -906,26 +906,17 @@ fn check_contact_inside_scan(
     let Some((scan_lo, scan_hi)) = scan.bounds() else {
         return Ok(());
     };
-    let fold = |f: fn(f64, f64) -> f64, start: f64, axis: usize| {
-        contact_xy.iter().map(|p| p[axis]).fold(start, f)
+    let Some(first) = contact_xy.first() else {
+        return Ok(());
     };
+    let (lo, hi) = contact_xy
+        .iter()
+        .fold((*first, *first), |(lo, hi), p| (lo.inf(p), hi.sup(p)));
     let sides = [
-        (
-            "west",
-            fold(f64::min, f64::INFINITY, 0) - f64::from(scan_lo.x),
-        ),
-        (
-            "east",
-            f64::from(scan_hi.x) - fold(f64::max, f64::NEG_INFINITY, 0),
-        ),
-        (
-            "south",
-            fold(f64::min, f64::INFINITY, 1) - f64::from(scan_lo.y),
-        ),
-        (
-            "north",
-            f64::from(scan_hi.y) - fold(f64::max, f64::NEG_INFINITY, 1),
-        ),
+        ("west", lo.x - f64::from(scan_lo.x)),
+        ("east", f64::from(scan_hi.x) - hi.x),
+        ("south", lo.y - f64::from(scan_lo.y)),
+        ("north", f64::from(scan_hi.y) - hi.y),
     ];
     match sides.into_iter().min_by(|a, b| a.1.total_cmp(&b.1)) {
         Some((side, gap_m)) if gap_m < margin_m => Err(FragilityError::Degenerate(format!(

@@ -120,10 +120,7 @@ pub fn process_flight(inputs: &ProcessInputs<'_>) -> MissionResult<MissionReport
     let mut mapped_live: Vec<MapPlan> = Vec::new();
     let mut log = Vec::with_capacity(flight.len());
     let has_flight_log = flight.has_flight_log();
-    while let Some(pose) = flight.next_pose()? {
-        let index = flight
-            .index()
-            .context("a recorded frame without an index")?;
+    while let Some((index, pose)) = flight.next_indexed()? {
         let t = pose.timestamp_s;
         let estimate = pose.world_from_camera_estimate;
         let mode = flight.mode();
@@ -262,10 +259,7 @@ pub fn process_flight(inputs: &ProcessInputs<'_>) -> MissionResult<MissionReport
     if !sessions.is_empty() {
         let bar_clock = Instant::now();
         flight.rewind();
-        while let Some(pose) = flight.next_pose()? {
-            let index = flight
-                .index()
-                .context("a recorded frame without an index")?;
+        while let Some((index, pose)) = flight.next_indexed()? {
             let estimate = &pose.world_from_camera_estimate;
             let mode = flight.mode();
             let wanted: Vec<usize> = (0..sessions.len())

@@ -94,6 +94,16 @@ impl Recorded {
         self.flight_log.is_some()
     }
 
+    /// [`Sensors::next_pose`] with the frame's index in the flight, for passes that also read
+    /// frames by index.
+    ///
+    /// # Errors
+    /// As [`Sensors::next_pose`].
+    pub fn next_indexed(&mut self) -> MissionResult<Option<(usize, SensedPose)>> {
+        let index = self.next;
+        Ok(self.next_pose()?.map(|pose| (index, pose)))
+    }
+
     /// The index of the frame [`Sensors::next_pose`] returned last.
     pub fn index(&self) -> Option<usize> {
         self.current
