@@ -112,6 +112,20 @@ pub fn read_toml_config<T: serde::de::DeserializeOwned>(
     toml::from_str(&text).with_context(|| format!("parsing {}", path.display()))
 }
 
+/// Opens a sequence with its own `camera.toml`, or with `camera_toml` in its place (the
+/// `--camera` option).
+pub fn open_sequence(
+    dir: &std::path::Path,
+    camera_toml: Option<&std::path::Path>,
+) -> anyhow::Result<scarp_datasets::sequence::Sequence> {
+    use anyhow::Context;
+    let sequence = match camera_toml {
+        Some(file) => scarp_datasets::sequence::Sequence::open_with_camera_file(dir, file),
+        None => scarp_datasets::sequence::Sequence::open(dir),
+    };
+    sequence.with_context(|| format!("opening sequence {}", dir.display()))
+}
+
 /// A progress bar on a terminal; hidden when stderr is not one (CI, pipes).
 pub fn progress_bar(length: u64, message: &'static str) -> ProgressBar {
     let bar = ProgressBar::new(length);

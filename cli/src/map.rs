@@ -78,6 +78,10 @@ pub struct MapArgs {
     /// Poses to fuse with.
     #[arg(long, value_enum, default_value = "groundtruth")]
     pub poses: PoseSource,
+    /// A `camera.toml` to read in place of the sequence's own (for example one with a `[color]`
+    /// table, so a Kinect's unregistered colour is registered to its depth on load).
+    #[arg(long)]
+    pub camera: Option<PathBuf>,
     /// Voxel size in metres.
     #[arg(long, default_value_t = 0.01)]
     pub voxel: f32,
@@ -201,8 +205,7 @@ pub enum TrackingReferenceArg {
 /// # Errors
 /// Sequence, pose, integration and writing errors naming the file or frame.
 pub fn run(args: MapArgs) -> anyhow::Result<()> {
-    let seq = Sequence::open(&args.sequence)
-        .with_context(|| format!("opening sequence {}", args.sequence.display()))?;
+    let seq = super::open_sequence(&args.sequence, args.camera.as_deref())?;
     anyhow::ensure!(!seq.is_empty(), "{}: no frames", args.sequence.display());
     let mut config = TsdfConfig {
         voxel_size_m: args.voxel,
@@ -273,7 +276,7 @@ fn refine(
         Some(path) => super::read_toml_config::<RefineConfig>(path)?,
         None => RefineConfig::default(),
     };
-    let registered = seq.camera_file.depth_registered && !args.unregistered_depth;
+    let registered = seq.camera_file.frames_registered() && !args.unregistered_depth;
     let config = RefineConfig {
         depth_residuals: base.depth_residuals && registered,
         tsdf,

@@ -31,6 +31,10 @@ pub struct OdometryArgs {
     /// A TOML file with `[odometry]` and `[keyframes]` tables overriding the defaults.
     #[arg(long)]
     pub config: Option<PathBuf>,
+    /// A `camera.toml` to read in place of the sequence's own (for example one with a `[color]`
+    /// table, so a Kinect's unregistered colour is registered to its depth on load).
+    #[arg(long)]
+    pub camera: Option<PathBuf>,
     /// Track only the first N frames.
     #[arg(long)]
     pub frames: Option<usize>,
@@ -230,8 +234,7 @@ fn poses_of(sequence: &Sequence, frames: usize, truth: bool) -> Option<Vec<Stamp
 /// # Errors
 /// Sequence, configuration and writing errors, naming the file.
 pub fn run(args: OdometryArgs) -> anyhow::Result<()> {
-    let sequence = Sequence::open(&args.sequence)
-        .with_context(|| format!("opening sequence {}", args.sequence.display()))?;
+    let sequence = super::open_sequence(&args.sequence, args.camera.as_deref())?;
     let config = match &args.config {
         Some(path) => super::read_toml_config(path)?,
         None => SequenceOdometryConfig::default(),

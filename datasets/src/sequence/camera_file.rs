@@ -2,6 +2,7 @@
 
 use std::path::Path;
 
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use scarp_slam::PinholeCamera;
 use serde::{Deserialize, Serialize};
 
@@ -32,6 +33,56 @@ pub struct CameraFile {
     /// is not used as a bundle-adjustment residual.
     #[serde(default = "registered_by_default")]
     pub depth_registered: bool,
+    /// The colour camera, when it is not the depth camera (the `[color]` table). The top-level
+    /// intrinsics are then the depth camera's, and each frame's colour is registered to its
+    /// depth on load ([`scarp_slam::image::register_color_to_depth`]), so the frames a
+    /// [`super::Sequence`] yields are registered whatever `depth_registered` says.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub color: Option<ColorCameraFile>,
+}
+
+/// The `[color]` table of `camera.toml`: the colour camera's intrinsics (pixels) and its pose
+/// relative to the depth camera.
+///
+/// For a Kinect v1 whose colour and depth are not registered (Microsoft 7-Scenes), the sensor's
+/// nominal colour intrinsics are fx = fy = 525, cx = 319.5, cy = 239.5.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ColorCameraFile {
+    /// Horizontal focal length, pixels.
+    pub fx: f64,
+    /// Vertical focal length, pixels; may be negative.
+    pub fy: f64,
+    /// Principal point column, pixels.
+    pub cx: f64,
+    /// Principal point row, pixels.
+    pub cy: f64,
+    /// Colour image width, pixels; the depth image's when absent.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub width: Option<u32>,
+    /// Colour image height, pixels; the depth image's when absent.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub height: Option<u32>,
+    /// The depth camera's origin in the colour camera's frame, metres (the translation of
+    /// `color_from_depth`). Zero when absent.
+    #[serde(default)]
+    pub color_from_depth_translation_m: [f64; 3],
+    /// The rotation of `color_from_depth` as a rotation vector (axis × angle), degrees. Zero
+    /// when absent.
+    #[serde(default)]
+    pub color_from_depth_rotation_deg: [f64; 3],
+}
+
+impl ColorCameraFile {
+    /// `color_from_depth`: points in the depth camera's frame to the colour camera's, metres.
+    pub fn color_from_depth(&self) -> Isometry3<f64> {
+        let [tx, ty, tz] = self.color_from_depth_translation_m;
+        let rotation_rad = Vector3::from(self.color_from_depth_rotation_deg).map(f64::to_radians);
+        Isometry3::from_parts(
+            Translation3::new(tx, ty, tz),
+            UnitQuaternion::from_scaled_axis(rotation_rad),
+        )
+    }
 }
 
 fn registered_by_default() -> bool {
@@ -50,7 +101,34 @@ impl CameraFile {
             height: camera.height,
             depth_scale,
             depth_registered: true,
+            color: None,
         }
+    }
+
+    /// Whether the frames read with this file are registered: the files themselves are, or a
+    /// `[color]` table registers them on load.
+    pub fn frames_registered(&self) -> bool {
+        self.depth_registered || self.color.is_some()
+    }
+
+    /// The colour camera of a `[color]` table, sized as the depth image unless it says
+    /// otherwise.
+    ///
+    /// # Errors
+    /// [`DatasetError::Geometry`] for unusable intrinsics.
+    pub fn color_camera(&self) -> Result<Option<PinholeCamera>, DatasetError> {
+        self.color
+            .map(|c| {
+                Ok(PinholeCamera::new(
+                    c.fx,
+                    c.fy,
+                    c.cx,
+                    c.cy,
+                    c.width.unwrap_or(self.width),
+                    c.height.unwrap_or(self.height),
+                )?)
+            })
+            .transpose()
     }
 
     /// The pinhole camera.
@@ -81,6 +159,21 @@ impl CameraFile {
         })?;
         file.camera()
             .map_err(|e| DatasetError::invalid(path.display().to_string(), e.to_string()))?;
+        file.color_camera().map_err(|e| {
+            DatasetError::invalid(format!("{}: [color]", path.display()), e.to_string())
+        })?;
+        if let Some(color) = &file.color {
+            let pose = color
+                .color_from_depth_translation_m
+                .iter()
+                .chain(&color.color_from_depth_rotation_deg);
+            if pose.clone().any(|x| !x.is_finite()) {
+                return Err(DatasetError::invalid(
+                    format!("{}: [color] color_from_depth", path.display()),
+                    "must be finite",
+                ));
+            }
+        }
         if !(file.depth_scale > 0.0 && file.depth_scale.is_finite()) {
             return Err(DatasetError::invalid(
                 format!("{}: depth_scale", path.display()),
@@ -123,5 +216,48 @@ mod tests {
         // Written and read back.
         file.write(&path).unwrap();
         assert_eq!(CameraFile::read(&path).unwrap(), file);
+        assert!(!file.frames_registered());
+    }
+
+    #[test]
+    fn a_color_table_round_trips_and_registers_the_frames() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("camera.toml");
+        let base = "fx = 585.0\nfy = 585.0\ncx = 320.0\ncy = 240.0\nwidth = 640\nheight = 480\n\
+                    depth_scale = 1000.0\ndepth_registered = false\n";
+        std::fs::write(
+            &path,
+            format!(
+                "{base}[color]\nfx = 525.0\nfy = 525.0\ncx = 319.5\ncy = 239.5\n\
+                 color_from_depth_translation_m = [-0.025, 0.0, 0.0]\n\
+                 color_from_depth_rotation_deg = [0.0, 0.0, 90.0]\n"
+            ),
+        )
+        .unwrap();
+        let file = CameraFile::read(&path).unwrap();
+        assert!(file.frames_registered());
+        let color = file.color.unwrap();
+        let camera = file.color_camera().unwrap().unwrap();
+        assert_eq!((camera.fx, camera.width, camera.height), (525.0, 640, 480));
+        let moved = color.color_from_depth() * nalgebra::Point3::new(1.0, 0.0, 0.0);
+        assert!((moved - nalgebra::Point3::new(-0.025, 1.0, 0.0)).norm() < 1e-12);
+        file.write(&path).unwrap();
+        assert_eq!(CameraFile::read(&path).unwrap(), file);
+
+        // A misspelt key and bad intrinsics inside the table are named.
+        std::fs::write(
+            &path,
+            format!("{base}[color]\nfx = 525.0\nfy = 525.0\ncx = 1.0\ncy = 1.0\nbaseline = 1\n"),
+        )
+        .unwrap();
+        let error = CameraFile::read(&path).unwrap_err().to_string();
+        assert!(error.contains("baseline"), "{error}");
+        std::fs::write(
+            &path,
+            format!("{base}[color]\nfx = -5.0\nfy = 525.0\ncx = 1.0\ncy = 1.0\n"),
+        )
+        .unwrap();
+        let error = CameraFile::read(&path).unwrap_err().to_string();
+        assert!(error.contains("[color]") && error.contains("fx"), "{error}");
     }
 }

@@ -4,6 +4,7 @@ use std::path::{Path, PathBuf};
 
 use nalgebra::Isometry3;
 use scarp_export::tum::{StampedPose, read_tum_trajectory};
+use scarp_slam::image::register_color_to_depth;
 use scarp_slam::{PinholeCamera, RgbdFrame};
 
 use super::camera_file::CameraFile;
@@ -92,7 +93,18 @@ impl Sequence {
     /// file and line for bad or out-of-order lines; [`DatasetError::Toml`] for a bad
     /// `camera.toml`.
     pub fn open(dir: &Path) -> Result<Self, DatasetError> {
-        let camera_file = CameraFile::read(&dir.join("camera.toml"))?;
+        Self::open_with_camera_file(dir, &dir.join("camera.toml"))
+    }
+
+    /// Opens a sequence directory as [`Self::open`] does, but with the intrinsics of
+    /// `camera_toml` in place of the directory's own `camera.toml`: for a sequence whose file
+    /// lacks what the sensor is known to have (a `[color]` table for a Kinect whose colour is
+    /// not registered to its depth), without editing the dataset.
+    ///
+    /// # Errors
+    /// As [`Self::open`], naming `camera_toml` for its errors.
+    pub fn open_with_camera_file(dir: &Path, camera_toml: &Path) -> Result<Self, DatasetError> {
+        let camera_file = CameraFile::read(camera_toml)?;
         let camera = camera_file.camera()?;
         let rgb_list = parse_image_list(&read_text(&dir.join("rgb.txt"))?, &dir.join("rgb.txt"))?;
         let depth_list =
@@ -167,7 +179,9 @@ impl Sequence {
         self.entries.is_empty()
     }
 
-    /// Loads frame `index`: colour, depth (metres) and the mask when present.
+    /// Loads frame `index`: colour, depth (metres) and the mask when present. With a `[color]`
+    /// table in `camera.toml`, the colour is registered to the depth
+    /// ([`scarp_slam::image::register_color_to_depth`]), so the frame is always registered.
     ///
     /// # Errors
     /// [`DatasetError::Invalid`] for an index out of range; image errors naming the file; a size
@@ -191,9 +205,34 @@ impl Sequence {
             }
         };
         let rgb = read_rgb_png(&entry.rgb_path)?;
-        check(&entry.rgb_path, rgb.width(), rgb.height())?;
+        let color_camera = self.camera_file.color_camera()?;
+        let color_size = color_camera
+            .as_ref()
+            .map_or((w, h), |c| (c.width, c.height));
+        if (rgb.width(), rgb.height()) != color_size {
+            return Err(DatasetError::Image {
+                path: entry.rgb_path.clone(),
+                message: format!(
+                    "image is {}×{}, camera.toml says {}×{}",
+                    rgb.width(),
+                    rgb.height(),
+                    color_size.0,
+                    color_size.1
+                ),
+            });
+        }
         let depth = read_depth_png(&entry.depth_path, self.camera_file.depth_scale)?;
         check(&entry.depth_path, depth.width(), depth.height())?;
+        let rgb = match (color_camera, &self.camera_file.color) {
+            (Some(color_camera), Some(color)) => register_color_to_depth(
+                &rgb,
+                &color_camera,
+                &depth,
+                &self.camera,
+                &color.color_from_depth(),
+            )?,
+            _ => rgb,
+        };
         let mask = match &entry.mask_path {
             Some(path) => {
                 let mask = read_mask_png(path)?;

@@ -4,6 +4,8 @@
 
 mod buffer;
 mod pyramid;
+mod registration;
 
 pub use buffer::{DepthImage, GrayImage, Image, MaskImage, RgbImage};
 pub use pyramid::{ImagePyramid, downsample_depth, downsample_gray, gray_from_rgb};
+pub use registration::register_color_to_depth;
