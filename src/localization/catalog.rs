@@ -21,8 +21,12 @@ pub struct ObserveReport {
     pub registered: Vec<u32>,
     /// Existing targets a box matched (hits) in this frame.
     pub matched: Vec<u32>,
-    /// Matched targets whose points were updated (the frame was a keyframe for them).
+    /// Matched targets whose points were updated (the frame was a keyframe for them), or
+    /// started afresh from the box (see [`TargetCatalog::restart_on_next_box`]).
     pub updated: Vec<u32>,
+    /// Matched targets whose points were started afresh from this frame's box.
+    #[serde(default)]
+    pub restarted: Vec<u32>,
     /// Matched targets not updated on a keyframe because no noised point had any weight.
     pub unsupported: Vec<u32>,
     /// Unconfirmed targets removed for too many misses.
@@ -54,6 +58,21 @@ impl TargetCatalog {
             next_id: 1,
             removed_count: 0,
         })
+    }
+
+    /// Makes target `id` start its points afresh (Algorithm 2, in the cone of the next box
+    /// paired with it) instead of updating them. The mission calls it when it flies the
+    /// fine-localization circle: the points then come from that stretch of flight alone, so the
+    /// centre is consistent with the state estimate of that stretch, not an average over
+    /// minutes of its drift. Returns false for an unknown id.
+    pub fn restart_on_next_box(&mut self, id: u32) -> bool {
+        match self.targets.iter_mut().find(|t| t.id == id) {
+            Some(t) => {
+                t.restart_pending = true;
+                true
+            }
+            None => false,
+        }
     }
 
     /// The configuration.
@@ -143,6 +162,18 @@ impl TargetCatalog {
         }
 
         let mut report = ObserveReport::default();
+        // Algorithm 2's points in box `bi`'s enlarged cone.
+        let fresh_points = |bi: usize, rng: &mut R| {
+            generate_points(
+                camera,
+                world_from_camera,
+                &enlarged[bi],
+                cfg.points_per_target,
+                cfg.min_depth_m,
+                cfg.max_depth_m,
+                rng,
+            )
+        };
         // Updates and registrations, in box order.
         let mut new_targets = Vec::new();
         for (bi, (track_id, bbox)) in boxes.iter().enumerate() {
@@ -153,7 +184,11 @@ impl TargetCatalog {
                     t.misses = 0;
                     t.last_track_id = Some(*track_id);
                     report.matched.push(t.id);
-                    if is_keyframe(
+                    if t.restart_pending {
+                        t.restart(fresh_points(bi, rng), *world_from_camera)?;
+                        report.restarted.push(t.id);
+                        report.updated.push(t.id);
+                    } else if is_keyframe(
                         &t.last_update_world_from_camera,
                         world_from_camera,
                         cfg.keyframe_translation_m,
@@ -182,15 +217,7 @@ impl TargetCatalog {
                     }
                 }
                 None => {
-                    let points = generate_points(
-                        camera,
-                        world_from_camera,
-                        &enlarged[bi],
-                        cfg.points_per_target,
-                        cfg.min_depth_m,
-                        cfg.max_depth_m,
-                        rng,
-                    );
+                    let points = fresh_points(bi, rng);
                     let id = self.next_id;
                     self.next_id += 1;
                     new_targets.push(Target::new(
@@ -328,6 +355,67 @@ mod tests {
         assert!((t.center() - rock).norm() < 0.3, "{}", t.center());
         assert_eq!(t.status(), TargetStatus::Converged);
         assert!(t.entropy_nats() < 3.0);
+    }
+
+    /// A state estimate whose error walks: the filter converges on a circle flown with one
+    /// error, then a second circle is flown with another. Started afresh for the second circle,
+    /// the centre lands where that circle's estimate puts the rock; kept, it lags between the
+    /// two.
+    #[test]
+    fn a_restarted_filter_follows_the_estimate_of_its_own_circle() {
+        let cam = camera();
+        let rock = Point3::new(3.0, -2.0, 1.0);
+        let (first_error, second_error) =
+            (Vector3::new(1.0, 0.0, 0.0), Vector3::new(-0.6, 0.4, 0.3));
+        let n = 60;
+        let run = |restart: bool| {
+            let mut catalog = TargetCatalog::new(LocalizationConfig::default()).unwrap();
+            let mut rng = Xoshiro256PlusPlus::seed_from_u64(3);
+            let mut observe = |catalog: &mut TargetCatalog, k: usize, error: &Vector3<f64>| {
+                let truth = circle_pose(&rock, k, n);
+                let bbox = sphere_box(&cam, &truth, &rock, 0.5);
+                let estimate = Isometry3::from_parts(
+                    (truth.translation.vector + error).into(),
+                    truth.rotation,
+                );
+                catalog
+                    .observe(&cam, &estimate, &[(7, bbox)], &mut rng)
+                    .unwrap()
+            };
+            for k in 0..2 * n {
+                observe(&mut catalog, k, &first_error);
+            }
+            assert_eq!(catalog.targets()[0].status(), TargetStatus::Converged);
+            let hits = catalog.targets()[0].hits();
+            if restart {
+                assert!(catalog.restart_on_next_box(1));
+                assert!(!catalog.restart_on_next_box(9), "no target 9");
+                assert!(catalog.targets()[0].restart_pending());
+            }
+            let report = observe(&mut catalog, 0, &second_error);
+            let t = &catalog.targets()[0];
+            if restart {
+                assert_eq!(report.restarted, vec![1]);
+                assert_eq!(report.updated, vec![1]);
+                assert!(!t.restart_pending());
+                assert_eq!(t.status(), TargetStatus::Tracking);
+                assert_eq!((t.id(), t.hits(), t.updates()), (1, hits + 1, 0));
+            } else {
+                assert!(report.restarted.is_empty());
+            }
+            for k in 1..n {
+                observe(&mut catalog, k, &second_error);
+            }
+            let t = &catalog.targets()[0];
+            assert_eq!(t.status(), TargetStatus::Converged);
+            (t.center() - (rock + second_error)).norm()
+        };
+        let (restarted, kept) = (run(true), run(false));
+        assert!(
+            restarted < 0.3,
+            "restarted: {restarted} m from the second circle's rock"
+        );
+        assert!(restarted < kept, "restarted {restarted} m, kept {kept} m");
     }
 
     #[test]

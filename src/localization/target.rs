@@ -46,6 +46,9 @@ pub struct Target {
     pub(crate) last_track_id: Option<u64>,
     /// Where the camera was at registration and at every update (world, m).
     pub(crate) view_positions: Vec<Point3<f64>>,
+    /// Set by [`super::TargetCatalog::restart_on_next_box`]: the next box paired with this
+    /// target starts its points afresh.
+    pub(crate) restart_pending: bool,
 }
 
 impl Target {
@@ -74,7 +77,34 @@ impl Target {
             last_update_world_from_camera: world_from_camera,
             last_track_id: track_id,
             view_positions: vec![Point3::from(world_from_camera.translation.vector)],
+            restart_pending: false,
         })
+    }
+
+    /// Starts the filter again from freshly generated `points` seen at `world_from_camera`, as
+    /// [`Self::new`] does, keeping the id, the hit and miss counters and the track: every
+    /// earlier view is forgotten, with the state estimate's error at those views.
+    ///
+    /// # Errors
+    /// [`super::LocalizationError::TooFewPoints`] when the points cannot be fitted; the
+    /// target is then left unchanged.
+    pub fn restart(
+        &mut self,
+        points: Vec<Point3<f64>>,
+        world_from_camera: Isometry3<f64>,
+    ) -> Result<(), super::LocalizationError> {
+        let fresh = Self::new(self.id, points, world_from_camera, self.last_track_id)?;
+        *self = Self {
+            hits: self.hits,
+            misses: self.misses,
+            ..fresh
+        };
+        Ok(())
+    }
+
+    /// Whether the next paired box restarts the filter.
+    pub fn restart_pending(&self) -> bool {
+        self.restart_pending
     }
 
     /// Replaces the points after an update and advances the status: KL of the new fit against

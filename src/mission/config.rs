@@ -37,6 +37,13 @@ pub struct MissionConfig {
     /// paper's behaviour), which lost rock 1 of the default world once, its KL hovering just
     /// above the threshold.
     pub map_unconverged_targets: bool,
+    /// Start a target's depth filter afresh when its fine-localization circle begins, so its
+    /// centre comes from that circle's views alone. The state estimate drifts by metres over a
+    /// flight; a point set that kept the search's views averages the estimate's error over
+    /// minutes, and the rings are flown in the frame of the estimate now. Default false: in a
+    /// paired campaign (session 16) the restart did not bring the estimate-frame error down,
+    /// the shorter stretch of views costing what the consistent estimate gained.
+    pub restart_filter_for_fine_localization: bool,
     /// Target detectors: which one the perception runs (simulated by default, or an ONNX
     /// model) and their tunables.
     pub detection: DetectionConfig,
@@ -73,6 +80,7 @@ impl Default for MissionConfig {
             collision_radius_m: 0.3,
             duplicate_radius_m: 2.0,
             map_unconverged_targets: true,
+            restart_filter_for_fine_localization: false,
             detection: DetectionConfig::default(),
             cylinder: CylinderEstimateConfig::default(),
             coverage: CoverageConfig::default(),

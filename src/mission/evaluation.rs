@@ -51,6 +51,11 @@ impl EstimatorErrorByTarget {
         }
     }
 
+    /// Forgets target `id`'s frames (its filter started afresh).
+    pub fn forget(&mut self, id: u32) {
+        self.sums.remove(&id);
+    }
+
     /// The mean error over the frames that updated target `id`; `None` if none did.
     pub fn mean_m(&self, id: u32) -> Option<Vector3<f64>> {
         // Entries exist only for targets updated at least once: the count is never zero.

@@ -159,9 +159,16 @@ pub fn process_flight(inputs: &ProcessInputs<'_>) -> MissionResult<MissionReport
             (true, _) => false,
             (false, _) => last_perceived.is_none_or(|last| t - last >= search_period_s - 1e-6),
         };
-        // The live mission resets the box tracks whenever it returns to the search.
+        // The live mission resets the box tracks whenever it returns to the search, and
+        // starts a target's filter afresh as its fine-localization circle begins.
         if previous_mode != Mode::Search && mode == Mode::Search {
             perception.reset_tracks()?;
+        }
+        if let Mode::FineLocalize(id) = mode
+            && previous_mode != mode
+            && config.restart_filter_for_fine_localization
+        {
+            perception.restart_target(id);
         }
         previous_mode = mode;
         if !perceives {

@@ -354,6 +354,12 @@ impl Perception {
         })
     }
 
+    /// Makes target `id`'s depth filter start afresh from the next box paired with it (see
+    /// [`TargetCatalog::restart_on_next_box`]); false for an unknown id.
+    pub fn restart_target(&mut self, id: u32) -> bool {
+        self.catalog.restart_on_next_box(id)
+    }
+
     /// Forgets every box track (after the camera looked elsewhere); targets stay.
     ///
     /// # Errors

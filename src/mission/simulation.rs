@@ -414,7 +414,12 @@ impl<'a> Mission<'a> {
                         self.targets.remove(&id);
                         self.resume_search(timings)?;
                     }
-                    Some(state) if self.mark_if_duplicate(id, &state.center) => {
+                    // A filter started afresh spans its whole cone until it is compact again:
+                    // its centre says nothing of duplicates yet.
+                    Some(state)
+                        if state.ready_for_fine_localization
+                            && self.mark_if_duplicate(id, &state.center) =>
+                    {
                         self.resume_search(timings)?;
                     }
                     Some(state) if state.converged => self.start_mapping(id, timings)?,
@@ -543,6 +548,9 @@ impl<'a> Mission<'a> {
         timings.detect_s += stage.detect_s;
         timings.track_s += stage.track_s;
         timings.localize_s += stage.localize_s;
+        for id in &stage.observed.restarted {
+            self.estimator_error_by_target.forget(*id);
+        }
         self.estimator_error_by_target
             .record(&stage.updated, estimate, truth);
         let t = frame.timestamp_s;
@@ -675,6 +683,9 @@ impl<'a> Mission<'a> {
         timings.planning_s += clock.elapsed().as_secs_f64();
         match result {
             Ok(()) => {
+                if config.restart_filter_for_fine_localization {
+                    self.perception.restart_target(id);
+                }
                 self.set_status(id, TargetStatus::FineLocalizing);
                 self.set_mode(Mode::FineLocalize(id));
             }
