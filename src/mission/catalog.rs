@@ -35,6 +35,12 @@ pub enum TargetStatus {
 }
 
 impl TargetStatus {
+    /// Whether the target's reported centre still follows its depth filter (it is being
+    /// localized); from mapping on, the centre is the one the mission acted on.
+    pub fn follows_filter(self) -> bool {
+        matches!(self, Self::Localizing | Self::FineLocalizing)
+    }
+
     /// The status as written in files.
     pub fn as_str(self) -> &'static str {
         match self {

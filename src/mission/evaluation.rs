@@ -35,16 +35,22 @@ pub struct EstimatorErrorByTarget {
 
 impl EstimatorErrorByTarget {
     /// Records one frame that updated the targets `updated`, seen at the estimated and the true
-    /// camera poses.
+    /// camera poses. Only targets still being localized count (not yet in `targets`, or with a
+    /// status that [`TargetStatus::follows_filter`]): from mapping on, the reported centre is
+    /// frozen, and a later update (the rock seen again from the search) did not localize it.
     pub fn record(
         &mut self,
         updated: &[u32],
+        targets: &Catalog,
         world_from_camera_estimate: &Isometry3<f64>,
         world_from_camera_truth: &Isometry3<f64>,
     ) {
         let error = world_from_camera_estimate.translation.vector
             - world_from_camera_truth.translation.vector;
-        for id in updated {
+        let localizing = updated
+            .iter()
+            .filter(|id| targets.get(id).is_none_or(|m| m.status.follows_filter()));
+        for id in localizing {
             let slot = self.sums.entry(*id).or_insert((Vector3::zeros(), 0));
             slot.0 += error;
             slot.1 += 1;
@@ -122,6 +128,38 @@ mod tests {
         let mut m = MissionTarget::new(0, &center, 0.0);
         m.set_status(status);
         m
+    }
+
+    #[test]
+    fn the_estimator_error_counts_only_frames_that_localized_the_target() {
+        let at = |x: f64| Isometry3::translation(x, 0.0, 0.0);
+        let mut targets = Catalog::new();
+        let mut errors = EstimatorErrorByTarget::default();
+        // Target 1 before the mission registers it, then while it is localized.
+        errors.record(&[1], &targets, &at(1.0), &at(0.0));
+        targets.insert(1, target(Point3::origin(), TargetStatus::Localizing));
+        errors.record(&[1], &targets, &at(3.0), &at(0.0));
+        targets
+            .get_mut(&1)
+            .unwrap()
+            .set_status(TargetStatus::FineLocalizing);
+        errors.record(&[1], &targets, &at(2.0), &at(0.0));
+        // Mapped: its centre is frozen, so seeing it again later changes nothing.
+        targets
+            .get_mut(&1)
+            .unwrap()
+            .set_status(TargetStatus::Mapping);
+        errors.record(&[1], &targets, &at(50.0), &at(0.0));
+        targets
+            .get_mut(&1)
+            .unwrap()
+            .set_status(TargetStatus::Mapped);
+        errors.record(&[1], &targets, &at(50.0), &at(0.0));
+        assert_eq!(errors.mean_m(1), Some(Vector3::new(2.0, 0.0, 0.0)));
+        // A filter started afresh forgets its earlier frames.
+        errors.forget(1);
+        assert_eq!(errors.mean_m(1), None);
+        assert_eq!(errors.mean_m(2), None);
     }
 
     #[test]

@@ -552,7 +552,7 @@ impl<'a> Mission<'a> {
             self.estimator_error_by_target.forget(*id);
         }
         self.estimator_error_by_target
-            .record(&stage.updated, estimate, truth);
+            .record(&stage.updated, &self.targets, estimate, truth);
         let t = frame.timestamp_s;
         let states = self.perception.target_states();
         for state in &states {
@@ -584,10 +584,7 @@ impl<'a> Mission<'a> {
         });
         for state in &states {
             if let Some(m) = self.targets.get_mut(&state.id)
-                && matches!(
-                    m.status,
-                    TargetStatus::Localizing | TargetStatus::FineLocalizing
-                )
+                && m.status.follows_filter()
             {
                 m.report.center = state.center.coords.into();
                 m.covariance_xy = Some(state.covariance_xy);
