@@ -342,7 +342,9 @@ pub fn localize(args: &LocalizeArgs) -> anyhow::Result<LocalizeSummary> {
             entry.world_from_camera_estimate,
             entry.world_from_camera_truth,
         ) {
-            pose_error_by_target.record(&report.updated, &estimate, &truth);
+            // No mission here: every update localizes (no centre is frozen for mapping).
+            let no_mission_targets = scarp::mission::catalog::Catalog::new();
+            pose_error_by_target.record(&report.updated, &no_mission_targets, &estimate, &truth);
         }
         bar.inc(1);
     }
