@@ -153,7 +153,15 @@ impl CameraFile {
     /// key, [`DatasetError::Invalid`] for bad intrinsics or a non-positive depth scale.
     pub fn read(path: &Path) -> Result<Self, DatasetError> {
         let text = std::fs::read_to_string(path).map_err(|e| DatasetError::io(path, e))?;
-        let file: Self = toml::from_str(&text).map_err(|e| DatasetError::Toml {
+        Self::parse(&text, path)
+    }
+
+    /// Parses and checks the text of a `camera.toml`; `path` names it in errors.
+    ///
+    /// # Errors
+    /// As [`Self::read`], without the I/O error.
+    pub fn parse(text: &str, path: &Path) -> Result<Self, DatasetError> {
+        let file: Self = toml::from_str(text).map_err(|e| DatasetError::Toml {
             path: path.to_path_buf(),
             message: e.to_string(),
         })?;
@@ -163,11 +171,11 @@ impl CameraFile {
             DatasetError::invalid(format!("{}: [color]", path.display()), e.to_string())
         })?;
         if let Some(color) = &file.color {
-            let pose = color
+            let mut pose = color
                 .color_from_depth_translation_m
                 .iter()
                 .chain(&color.color_from_depth_rotation_deg);
-            if pose.clone().any(|x| !x.is_finite()) {
+            if pose.any(|x| !x.is_finite()) {
                 return Err(DatasetError::invalid(
                     format!("{}: [color] color_from_depth", path.display()),
                     "must be finite",
