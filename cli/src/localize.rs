@@ -320,6 +320,8 @@ pub fn localize(args: &LocalizeArgs) -> anyhow::Result<LocalizeSummary> {
     )?;
     let mut merged = 0;
     let mut pose_error_by_target = EstimatorErrorByTarget::default();
+    // No mission here: every update localizes (no centre is frozen for mapping).
+    let no_mission_targets = scarp::mission::catalog::Catalog::new();
     let bar = super::progress_bar(seq.len() as u64, "localizing");
     for index in 0..seq.len() {
         let world_from_camera = frame_pose(&seq, index, args.poses)?;
@@ -342,8 +344,6 @@ pub fn localize(args: &LocalizeArgs) -> anyhow::Result<LocalizeSummary> {
             entry.world_from_camera_estimate,
             entry.world_from_camera_truth,
         ) {
-            // No mission here: every update localizes (no centre is frozen for mapping).
-            let no_mission_targets = scarp::mission::catalog::Catalog::new();
             pose_error_by_target.record(&report.updated, &no_mission_targets, &estimate, &truth);
         }
         bar.inc(1);

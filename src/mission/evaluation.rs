@@ -135,26 +135,18 @@ mod tests {
         let at = |x: f64| Isometry3::translation(x, 0.0, 0.0);
         let mut targets = Catalog::new();
         let mut errors = EstimatorErrorByTarget::default();
+        let set = |targets: &mut Catalog, status| targets.get_mut(&1).unwrap().set_status(status);
         // Target 1 before the mission registers it, then while it is localized.
         errors.record(&[1], &targets, &at(1.0), &at(0.0));
         targets.insert(1, target(Point3::origin(), TargetStatus::Localizing));
         errors.record(&[1], &targets, &at(3.0), &at(0.0));
-        targets
-            .get_mut(&1)
-            .unwrap()
-            .set_status(TargetStatus::FineLocalizing);
+        set(&mut targets, TargetStatus::FineLocalizing);
         errors.record(&[1], &targets, &at(2.0), &at(0.0));
         // Mapped: its centre is frozen, so seeing it again later changes nothing.
-        targets
-            .get_mut(&1)
-            .unwrap()
-            .set_status(TargetStatus::Mapping);
-        errors.record(&[1], &targets, &at(50.0), &at(0.0));
-        targets
-            .get_mut(&1)
-            .unwrap()
-            .set_status(TargetStatus::Mapped);
-        errors.record(&[1], &targets, &at(50.0), &at(0.0));
+        for status in [TargetStatus::Mapping, TargetStatus::Mapped] {
+            set(&mut targets, status);
+            errors.record(&[1], &targets, &at(50.0), &at(0.0));
+        }
         assert_eq!(errors.mean_m(1), Some(Vector3::new(2.0, 0.0, 0.0)));
         // A filter started afresh forgets its earlier frames.
         errors.forget(1);

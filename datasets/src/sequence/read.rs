@@ -193,8 +193,12 @@ impl Sequence {
                 format!("{index} is beyond the {} frames", self.entries.len()),
             )
         })?;
-        let (w, h) = (self.camera.width, self.camera.height);
-        let check = |path: &Path, width: u32, height: u32| {
+        let color_camera = self.camera_file.color_camera()?;
+        let depth_size = (self.camera.width, self.camera.height);
+        let color_size = color_camera
+            .as_ref()
+            .map_or(depth_size, |c| (c.width, c.height));
+        let check = |path: &Path, (width, height): (u32, u32), (w, h): (u32, u32)| {
             if (width, height) == (w, h) {
                 Ok(())
             } else {
@@ -205,28 +209,17 @@ impl Sequence {
             }
         };
         let rgb = read_rgb_png(&entry.rgb_path)?;
-        let color_camera = self.camera_file.color_camera()?;
-        let color_size = color_camera
-            .as_ref()
-            .map_or((w, h), |c| (c.width, c.height));
-        if (rgb.width(), rgb.height()) != color_size {
-            return Err(DatasetError::Image {
-                path: entry.rgb_path.clone(),
-                message: format!(
-                    "image is {}×{}, camera.toml says {}×{}",
-                    rgb.width(),
-                    rgb.height(),
-                    color_size.0,
-                    color_size.1
-                ),
-            });
-        }
+        check(&entry.rgb_path, (rgb.width(), rgb.height()), color_size)?;
         let depth = read_depth_png(&entry.depth_path, self.camera_file.depth_scale)?;
-        check(&entry.depth_path, depth.width(), depth.height())?;
-        let rgb = match (color_camera, &self.camera_file.color) {
+        check(
+            &entry.depth_path,
+            (depth.width(), depth.height()),
+            depth_size,
+        )?;
+        let rgb = match (&color_camera, &self.camera_file.color) {
             (Some(color_camera), Some(color)) => register_color_to_depth(
                 &rgb,
-                &color_camera,
+                color_camera,
                 &depth,
                 &self.camera,
                 &color.color_from_depth(),
@@ -236,7 +229,7 @@ impl Sequence {
         let mask = match &entry.mask_path {
             Some(path) => {
                 let mask = read_mask_png(path)?;
-                check(path, mask.width(), mask.height())?;
+                check(path, (mask.width(), mask.height()), depth_size)?;
                 Some(mask)
             }
             None => None,

@@ -38,22 +38,25 @@ pub fn register_color_to_depth(
     depth_m.check_size("depth image", depth_camera.width, depth_camera.height)?;
     let width = depth_camera.width as usize;
     let mut data = vec![[0u8; 3]; depth_m.as_slice().len()];
-    data.par_chunks_mut(width).enumerate().for_each(|(v, row)| {
-        for (u, out) in row.iter_mut().enumerate() {
-            let pixel = Point2::new(u as f64, v as f64);
-            let depth = f64::from(depth_m.as_slice()[v * width + u]);
-            let in_color = if depth > 0.0 && depth.is_finite() {
-                color_from_depth * depth_camera.unproject(&pixel, depth)
-            } else {
-                let ray: Point3<f64> = depth_camera.unproject(&pixel, 1.0);
-                Point3::from(color_from_depth.rotation * ray.coords)
-            };
-            *out = match color_camera.project(&in_color) {
-                Some(p) => sample_rgb_clamped(rgb, p.x, p.y),
-                None => [0, 0, 0],
-            };
-        }
-    });
+    data.par_chunks_mut(width)
+        .zip(depth_m.as_slice().par_chunks(width))
+        .enumerate()
+        .for_each(|(v, (row, depth_row))| {
+            for (u, (out, &depth)) in row.iter_mut().zip(depth_row).enumerate() {
+                let pixel = Point2::new(u as f64, v as f64);
+                let depth = f64::from(depth);
+                let in_color = if depth > 0.0 && depth.is_finite() {
+                    color_from_depth * depth_camera.unproject(&pixel, depth)
+                } else {
+                    let ray = depth_camera.unproject(&pixel, 1.0).coords;
+                    Point3::from(color_from_depth.rotation * ray)
+                };
+                *out = match color_camera.project(&in_color) {
+                    Some(p) => sample_rgb_clamped(rgb, p.x, p.y),
+                    None => [0, 0, 0],
+                };
+            }
+        });
     RgbImage::from_vec(depth_camera.width, depth_camera.height, data)
 }
 
