@@ -342,6 +342,22 @@ impl TsdfVolume {
         }
     }
 
+    /// Stores block `coord` with the given voxels (TSDF, weight; colour grey), for tests that
+    /// need volumes no camera would produce.
+    #[cfg(test)]
+    pub(crate) fn insert_block_for_test(&mut self, coord: BlockCoord, voxels: &[(f32, f32)]) {
+        let mut block = Block::new();
+        for (i, &(t, w)) in voxels.iter().enumerate().take(BLOCK_VOXELS) {
+            block.tsdf[i] = t;
+            block.weight[i] = w;
+            block.color[i] = [128, 128, 128, 0];
+        }
+        let i = self.blocks.len() as u32;
+        self.index.insert(coord, i);
+        self.coords.push(coord);
+        self.blocks.push(block);
+    }
+
     /// The voxel at global voxel coordinates `voxel`, if its block is allocated.
     pub fn voxel(&self, voxel: [i32; 3]) -> Option<VoxelSample> {
         let (b, l) = split_voxel(voxel);
