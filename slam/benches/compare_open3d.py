@@ -124,7 +124,8 @@ def run_scarp_map(args):
     the path of its map.json (in a temporary directory kept until the process ends)."""
     out = Path(tempfile.mkdtemp(prefix="scarp_map_"))
     atexit.register(shutil.rmtree, out, ignore_errors=True)
-    command = [str(args.scarp), "map", str(args.sequence), "--poses", "groundtruth",
+    # Resolved: `Path("./scarp")` prints as "scarp", which subprocess would look up on PATH.
+    command = [str(args.scarp.resolve()), "map", str(args.sequence), "--poses", "groundtruth",
                "--voxel", str(args.voxel), "--max-depth", str(args.max_depth),
                "--out", str(out), "--log", "warn"]
     if args.roi:
