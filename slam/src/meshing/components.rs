@@ -17,14 +17,10 @@ fn find(parent: &mut [u32], mut i: u32) -> u32 {
 /// out-of-range vertex index are dropped.
 pub fn remove_small_components(mesh: &TriangleMesh, min_triangles: usize) -> TriangleMesh {
     let n = mesh.positions.len();
-    let faces: Vec<[u32; 3]> = mesh
-        .faces
-        .iter()
-        .copied()
-        .filter(|f| f.iter().all(|&v| (v as usize) < n))
-        .collect();
+    let in_range = |f: &&[u32; 3]| f.iter().all(|&v| (v as usize) < n);
+    let faces = || mesh.faces.iter().filter(in_range);
     let mut parent: Vec<u32> = (0..n as u32).collect();
-    for f in &faces {
+    for f in faces() {
         for &v in &f[1..] {
             let a = find(&mut parent, f[0]);
             let b = find(&mut parent, v);
@@ -35,15 +31,22 @@ pub fn remove_small_components(mesh: &TriangleMesh, min_triangles: usize) -> Tri
         }
     }
     let mut count = vec![0usize; n];
-    let roots: Vec<u32> = faces.iter().map(|f| find(&mut parent, f[0])).collect();
+    let roots: Vec<u32> = faces().map(|f| find(&mut parent, f[0])).collect();
     for &r in &roots {
         count[r as usize] += 1;
     }
     let mut remap = vec![u32::MAX; n];
-    let mut out = TriangleMesh::default();
     let has_normals = mesh.normals.len() == n;
     let has_colors = mesh.colors.len() == n;
-    for (f, &r) in faces.iter().zip(&roots) {
+    // Room for everything kept, so the large arrays are never copied to grow (pages of the
+    // room a dropped component leaves unused are never touched).
+    let mut out = TriangleMesh {
+        positions: Vec::with_capacity(n),
+        normals: Vec::with_capacity(if has_normals { n } else { 0 }),
+        colors: Vec::with_capacity(if has_colors { n } else { 0 }),
+        faces: Vec::with_capacity(roots.len()),
+    };
+    for (f, &r) in faces().zip(&roots) {
         if count[r as usize] < min_triangles {
             continue;
         }
