@@ -12,7 +12,7 @@ use scarp_datasets::paths::default_orbit;
 use scarp_datasets::render::Renderer;
 use scarp_datasets::sensor::SensorConfig;
 use scarp_datasets::world::World;
-use scarp_slam::meshing::{MeshingConfig, extract_mesh};
+use scarp_slam::meshing::{MeshingConfig, extract_mesh, remove_small_components};
 use scarp_slam::tsdf::{Roi, TsdfConfig, TsdfVolume};
 use scarp_slam::{PinholeCamera, RgbdFrame};
 
@@ -78,6 +78,12 @@ fn bench(c: &mut Criterion) {
                 group.bench_function(format!("marching cubes, 1 cm, {region}, {noise}"), |b| {
                     b.iter(|| extract_mesh(&volume, &MeshingConfig::default()))
                 });
+                // `scarp map`'s filter of floating noise, after marching cubes.
+                let raw = extract_mesh(&volume, &MeshingConfig::default());
+                group.bench_function(
+                    format!("small components under 200 triangles, {region}, {noise}"),
+                    |b| b.iter(|| remove_small_components(&raw, 200)),
+                );
             }
         }
     }
