@@ -187,6 +187,10 @@ struct BlockMesh {
     triangles: Vec<[u32; 3]>,
 }
 
+/// An edge reference's layout: key in the low bits, owner corner from bit 16, and the
+/// in-cube-face mark in bit 31 (of a triangle's first reference).
+const EDGE_KEY_MASK: u32 = 0xffff;
+const OWNER_SHIFT: u32 = 16;
 const IN_CUBE_FACE: u32 = 1 << 31;
 
 impl BlockMesh {
@@ -207,36 +211,28 @@ impl BlockMesh {
         let voxel = volume.config().voxel_size_m;
         let side = BLOCK_SIDE as i32;
         let n = Neighbourhood::gather(volume, coord, min_weight);
-        // Per row (y, z), bit x + 1: the edge from (x, y, z) to its +axis neighbour has both
-        // ends observed and changes sign.
-        let crossing: [[u16; 3]; BLOCK_SIDE * BLOCK_SIDE] = std::array::from_fn(|i| {
-            let (y, z) = ((i % BLOCK_SIDE) as i32, (i / BLOCK_SIDE) as i32);
-            let r = row_index(y, z);
-            let (valid, inside) = (n.valid[r], n.inside[r]);
-            let (ry, rz) = (row_index(y + 1, z), row_index(y, z + 1));
-            [
-                valid & (valid >> 1) & (inside ^ (inside >> 1)),
-                valid & n.valid[ry] & (inside ^ n.inside[ry]),
-                valid & n.valid[rz] & (inside ^ n.inside[rz]),
-            ]
-            .map(|m| m & OWN_X)
-        });
-        let vertices = crossing
-            .iter()
-            .flatten()
-            .map(|m| m.count_ones() as usize)
-            .sum();
-        out.reserve(vertices);
-        for (i, crossing) in crossing.iter().enumerate() {
-            let (y, z) = ((i % BLOCK_SIDE) as i32, (i / BLOCK_SIDE) as i32);
-            let mut bits = crossing[0] | crossing[1] | crossing[2];
-            while bits != 0 {
-                let b = bits.trailing_zeros();
-                bits &= bits - 1;
-                let x = b as i32 - 1;
-                for (axis, m) in crossing.iter().enumerate() {
-                    if m >> b & 1 == 1 {
-                        out.push_vertex(&n, coord, [x, y, z], axis, voxel);
+        for z in 0..side {
+            for y in 0..side {
+                let r = row_index(y, z);
+                let (valid, inside) = (n.valid[r], n.inside[r]);
+                let (ry, rz) = (row_index(y + 1, z), row_index(y, z + 1));
+                // Bit x + 1: the edge from (x, y, z) to its +axis neighbour has both ends
+                // observed and changes sign.
+                let crossing = [
+                    valid & (valid >> 1) & (inside ^ (inside >> 1)),
+                    valid & n.valid[ry] & (inside ^ n.inside[ry]),
+                    valid & n.valid[rz] & (inside ^ n.inside[rz]),
+                ]
+                .map(|m| m & OWN_X);
+                let mut bits = crossing[0] | crossing[1] | crossing[2];
+                while bits != 0 {
+                    let b = bits.trailing_zeros();
+                    bits &= bits - 1;
+                    let x = b as i32 - 1;
+                    for (axis, m) in crossing.iter().enumerate() {
+                        if m >> b & 1 == 1 {
+                            out.push_vertex(&n, coord, [x, y, z], axis, voxel);
+                        }
                     }
                 }
             }
@@ -281,15 +277,6 @@ impl BlockMesh {
             }
         }
         out
-    }
-
-    fn reserve(&mut self, vertices: usize) {
-        self.keys.reserve_exact(vertices);
-        self.positions.reserve_exact(vertices);
-        self.normals.reserve_exact(vertices);
-        self.colors.reserve_exact(vertices);
-        // About two triangles per vertex on a closed surface.
-        self.triangles.reserve(2 * vertices);
     }
 
     /// Adds the vertex on the edge from gathered voxel `at` along `axis` (both ends observed,
@@ -347,7 +334,7 @@ fn edge_reference(cell: [i32; 3], e: usize) -> u32 {
         }
     }
     let key = local_index(local[0], local[1], local[2]) * 3 + EDGE_AXIS[e];
-    (owner_corner << 16 | key) as u32
+    ((owner_corner << OWNER_SHIFT) | key) as u32
 }
 
 /// Extracts the zero level set of `volume` as a triangle mesh in world ENU metres, normals
@@ -399,10 +386,10 @@ pub fn extract_mesh(volume: &TsdfVolume, config: &MeshingConfig) -> TriangleMesh
             'triangle: for refs in &block.triangles {
                 let mut ids = [0u32; 3];
                 for (slot, &r) in refs.iter().enumerate() {
-                    let Some(owner) = owners[(r >> 16 & 7) as usize] else {
+                    let Some(owner) = owners[((r >> OWNER_SHIFT) & 7) as usize] else {
                         continue 'triangle;
                     };
-                    let key = (r & 0xffff) as u16;
+                    let key = (r & EDGE_KEY_MASK) as u16;
                     let Ok(k) = per_block[owner].keys.binary_search(&key) else {
                         continue 'triangle;
                     };
