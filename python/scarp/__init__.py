@@ -197,17 +197,28 @@ class TsdfVolume:
         )
         return json.loads(stats)
 
-    def extract_mesh(self, min_weight: float = 0.0, min_component_triangles: int = 0) -> Mesh:
+    def extract_mesh(
+        self, min_weight: float = 0.0, min_component_triangles: int = 0, min_observations: int = 0
+    ) -> Mesh:
         """Marching cubes over every allocated block.
 
         Args:
-            min_weight: only voxels whose weight exceeds this take part.
+            min_weight: only voxels whose weight (sum of 1/z^2, z in metres) exceeds this take part.
             min_component_triangles: drop connected components with fewer triangles
                 (``scarp map`` uses 200).
+            min_observations: only voxels observed by at least this many frames take part
+                (0 to 255; Open3D's ``weight_threshold``).
         """
-        if isinstance(min_component_triangles, bool) or int(min_component_triangles) < 0:
-            raise ValueError("min_component_triangles must be a non-negative integer")
-        return Mesh._from_native(self._native.extract_mesh(float(min_weight), int(min_component_triangles)))
+        for name, value, top in (
+            ("min_component_triangles", min_component_triangles, None),
+            ("min_observations", min_observations, 255),
+        ):
+            if isinstance(value, bool) or int(value) < 0 or (top is not None and int(value) > top):
+                bound = f" at most {top}" if top is not None else ""
+                raise ValueError(f"{name} must be a non-negative integer{bound}")
+        return Mesh._from_native(
+            self._native.extract_mesh(float(min_weight), int(min_component_triangles), int(min_observations))
+        )
 
     def stats(self) -> Dict[str, int]:
         """Blocks and voxels allocated (the Rust ``VolumeStats``)."""

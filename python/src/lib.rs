@@ -384,12 +384,13 @@ impl PyTsdfVolume {
     }
 
     /// Marching cubes over the volume: (vertices, triangles, colors, normals).
-    #[pyo3(signature = (min_weight=0.0, min_component_triangles=0))]
+    #[pyo3(signature = (min_weight=0.0, min_component_triangles=0, min_observations=0))]
     fn extract_mesh<'py>(
         &self,
         py: Python<'py>,
         min_weight: f32,
         min_component_triangles: usize,
+        min_observations: u8,
     ) -> PyResult<MeshArrays<'py>> {
         guard("TsdfVolume.extract_mesh", || {
             if !(min_weight.is_finite() && min_weight >= 0.0) {
@@ -399,6 +400,7 @@ impl PyTsdfVolume {
             }
             let config = MeshingConfig {
                 min_weight,
+                min_observations,
                 min_component_triangles,
             };
             let volume = &self.volume;

@@ -39,6 +39,12 @@ pub struct CameraFile {
     /// [`super::Sequence`] yields are registered whatever `depth_registered` says.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub color: Option<ColorCameraFile>,
+    /// The depth sensor's noise σ at 1 m, metres, for a σ growing as z² (stereo, structured
+    /// light); 0 for exact depth. Absent when unknown (recorded and outside sequences).
+    /// `scarp render` writes it from its sensor model. TSDF fusion uses it to tell precise
+    /// pixels from noisy ones ([`scarp_slam::tsdf::TsdfConfig::depth_sigma_at_1m_m`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub depth_sigma_at_1m_m: Option<f64>,
 }
 
 /// The `[color]` table of `camera.toml`: the colour camera's intrinsics (pixels) and its pose
@@ -102,6 +108,7 @@ impl CameraFile {
             depth_scale,
             depth_registered: true,
             color: None,
+            depth_sigma_at_1m_m: None,
         }
     }
 

@@ -94,7 +94,16 @@ pub fn write_sequence(
     for sub in ["rgb", "depth", "mask"] {
         std::fs::create_dir_all(dir.join(sub)).map_err(|e| DatasetError::io(&dir.join(sub), e))?;
     }
-    CameraFile::new(&settings.camera, settings.depth_scale).write(&dir.join("camera.toml"))?;
+    let depth_sigma_at_1m_m = if settings.noise {
+        settings.sensor.depth_sigma_m(1.0, settings.camera.fx)
+    } else {
+        0.0
+    };
+    CameraFile {
+        depth_sigma_at_1m_m: Some(depth_sigma_at_1m_m),
+        ..CameraFile::new(&settings.camera, settings.depth_scale)
+    }
+    .write(&dir.join("camera.toml"))?;
     let estimate = if settings.noise {
         settings
             .estimator

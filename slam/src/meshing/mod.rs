@@ -30,9 +30,12 @@ pub use table::{CaseTable, EDGE_AXIS, EDGE_LOWER_CORNER, corner_offset};
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct MeshingConfig {
-    /// A voxel takes part only when its weight exceeds this. Default 0 (any observation); raise
-    /// it to drop surfaces seen only once or twice.
+    /// A voxel takes part only when its weight (Σ 1/z², z in metres) exceeds this. Default 0
+    /// (any observation).
     pub min_weight: f32,
+    /// A voxel takes part only when at least this many frames observed it (counts saturate at
+    /// 255). Default 0 (any observation). Open3D's `weight_threshold` counts the same way.
+    pub min_observations: u8,
     /// Connected components with fewer triangles than this are dropped. Default 0 (keep all);
     /// `scarp map` uses 200 to remove floating noise.
     pub min_component_triangles: usize,
@@ -42,8 +45,20 @@ impl Default for MeshingConfig {
     fn default() -> Self {
         Self {
             min_weight: 0.0,
+            min_observations: 0,
             min_component_triangles: 0,
         }
+    }
+}
+
+impl MeshingConfig {
+    /// Whether a voxel of weight `weight` and stored word `word` (colour, observations) takes
+    /// part in meshing. Branch-free, so block scans run in SIMD lanes.
+    #[inline]
+    fn keeps(&self, weight: f32, word: [u8; 4]) -> bool {
+        (weight > 0.0)
+            & (weight > self.min_weight)
+            & (crate::tsdf::observations_of(word) >= self.min_observations)
     }
 }
 
@@ -81,7 +96,7 @@ struct Neighbourhood {
 
 impl Neighbourhood {
     /// Gathers the neighbourhood of the block at `coord`, row by row.
-    fn gather(volume: &TsdfVolume, coord: &BlockCoord, min_weight: f32) -> Self {
+    fn gather(volume: &TsdfVolume, coord: &BlockCoord, config: &MeshingConfig) -> Self {
         let mut n = Self {
             tsdf: [1.0; GATHER_VOXELS],
             color: [[0; 3]; GATHER_VOXELS],
@@ -112,11 +127,15 @@ impl Neighbourhood {
                             let dst = gather_index(x0, y, z);
                             let tsdf = &block.tsdf[src..src + len];
                             n.tsdf[dst..dst + len].copy_from_slice(tsdf);
+                            let words = &block.color[src..src + len];
                             let (mut valid, mut inside) = (0u16, 0u16);
-                            for (k, (&w, &t)) in
-                                block.weight[src..src + len].iter().zip(tsdf).enumerate()
+                            for (k, ((&w, &t), &word)) in block.weight[src..src + len]
+                                .iter()
+                                .zip(tsdf)
+                                .zip(words)
+                                .enumerate()
                             {
-                                if w > 0.0 && w > min_weight {
+                                if config.keeps(w, word) {
                                     let bit = 1 << (x0 + 1 + k as i32);
                                     valid |= bit;
                                     if t < 0.0 {
@@ -127,10 +146,7 @@ impl Neighbourhood {
                             let row = row_index(y, z);
                             n.valid[row] |= valid;
                             n.inside[row] |= inside;
-                            for (c, &rgbx) in n.color[dst..dst + len]
-                                .iter_mut()
-                                .zip(&block.color[src..src + len])
-                            {
+                            for (c, &rgbx) in n.color[dst..dst + len].iter_mut().zip(words) {
                                 *c = crate::tsdf::rgb_of(rgbx);
                             }
                         }
@@ -206,11 +222,16 @@ impl BlockMesh {
 
     /// The block's vertices (every sign-changing edge starting at one of its voxels) and its
     /// cells' triangles, from one gathered neighbourhood.
-    fn build(volume: &TsdfVolume, coord: &BlockCoord, min_weight: f32, table: &CaseTable) -> Self {
+    fn build(
+        volume: &TsdfVolume,
+        coord: &BlockCoord,
+        config: &MeshingConfig,
+        table: &CaseTable,
+    ) -> Self {
         let mut out = Self::empty();
         let voxel = volume.config().voxel_size_m;
         let side = BLOCK_SIDE as i32;
-        let n = Neighbourhood::gather(volume, coord, min_weight);
+        let n = Neighbourhood::gather(volume, coord, config);
         for z in 0..side {
             for y in 0..side {
                 let r = row_index(y, z);
@@ -342,14 +363,14 @@ fn edge_reference(cell: [i32; 3], e: usize) -> u32 {
 pub fn extract_mesh(volume: &TsdfVolume, config: &MeshingConfig) -> TriangleMesh {
     let table = CaseTable::new();
     let coords = volume.block_coords();
-    let active = active_blocks(volume, config.min_weight);
+    let active = active_blocks(volume, config);
     // Phase 1: each block's own edge vertices and its cells' triangles, by edge reference.
     let per_block: Vec<BlockMesh> = coords
         .par_iter()
         .zip(&active)
         .map(|(coord, &active)| {
             if active {
-                BlockMesh::build(volume, coord, config.min_weight, &table)
+                BlockMesh::build(volume, coord, config, &table)
             } else {
                 BlockMesh::empty()
             }
@@ -457,7 +478,7 @@ const EDGE_FACES: [u8; 12] = {
 /// observed voxels of the block and its seven upper neighbours (+x, +y, +z and their
 /// combinations, which its cells reach) include both signs. Free-space blocks (all TSDF
 /// positive) and blocks behind surfaces are skipped without gathering anything.
-fn active_blocks(volume: &TsdfVolume, min_weight: f32) -> Vec<bool> {
+fn active_blocks(volume: &TsdfVolume, config: &MeshingConfig) -> Vec<bool> {
     const NEGATIVE: u8 = 1;
     const POSITIVE: u8 = 2;
     let signs: Vec<u8> = volume
@@ -466,8 +487,8 @@ fn active_blocks(volume: &TsdfVolume, min_weight: f32) -> Vec<bool> {
         .map(|b| {
             // Branch-free, so the loop runs in SIMD lanes: most blocks are scanned whole.
             let (mut negative, mut positive) = (false, false);
-            for (&t, &w) in b.tsdf.iter().zip(b.weight.iter()) {
-                let observed = (w > 0.0) & (w > min_weight);
+            for ((&t, &w), &word) in b.tsdf.iter().zip(b.weight.iter()).zip(b.color.iter()) {
+                let observed = config.keeps(w, word);
                 negative |= observed & (t < 0.0);
                 positive |= observed & !(t < 0.0);
             }
@@ -555,9 +576,13 @@ mod tests {
     use crate::tsdf::TsdfConfig;
 
     /// A 2 × 2 × 2-block volume with some blocks missing and random voxels: unobserved, barely
-    /// observed (under a minimum weight of 1) or observed, of either sign.
+    /// observed (under a minimum weight of 1, or seen by fewer than 3 frames) or observed, of
+    /// either sign.
     fn random_volume() -> impl Strategy<Value = TsdfVolume> {
-        let voxel = (0u8..3, -1.0f32..1.0).prop_map(|(w, t)| (t, [0.0, 0.5, 2.0][w as usize]));
+        let voxel = (0u8..3, 1u8..5, -1.0f32..1.0).prop_map(|(w, n, t)| {
+            let weight = [0.0, 0.5, 2.0][w as usize];
+            (t, weight, if weight > 0.0 { n } else { 0 })
+        });
         let block = proptest::option::weighted(0.8, proptest::collection::vec(voxel, BLOCK_VOXELS));
         proptest::collection::vec(block, 8).prop_map(|blocks| {
             let mut volume = TsdfVolume::new(TsdfConfig::default()).expect("default config");
@@ -576,17 +601,24 @@ mod tests {
 
         /// The row bit masks find exactly the edges and cells that a voxel-by-voxel scan finds.
         #[test]
-        fn row_masks_find_every_crossing_edge_and_cell(volume in random_volume(), min_weight in prop_oneof![Just(0.0f32), Just(1.0f32)]) {
+        fn row_masks_find_every_crossing_edge_and_cell(
+            volume in random_volume(),
+            min_weight in prop_oneof![Just(0.0f32), Just(1.0f32)],
+            min_observations in prop_oneof![Just(0u8), Just(3u8)],
+        ) {
             let table = CaseTable::new();
             let side = BLOCK_SIDE as i32;
+            let config = MeshingConfig { min_weight, min_observations, ..MeshingConfig::default() };
             let sample = |v: [i32; 3]| {
                 volume
                     .voxel(v)
-                    .filter(|s| s.weight > 0.0 && s.weight > min_weight)
+                    .filter(|s| {
+                        s.weight > 0.0 && s.weight > min_weight && s.observations >= min_observations
+                    })
                     .map(|s| s.tsdf < 0.0)
             };
             for coord in volume.block_coords() {
-                let built = BlockMesh::build(&volume, coord, min_weight, &table);
+                let built = BlockMesh::build(&volume, coord, &config, &table);
                 let mut keys = Vec::new();
                 let mut triangles = 0;
                 for z in 0..side {

@@ -61,10 +61,10 @@ fn unpack(key: u64) -> BlockCoord {
 /// volume has seen a few frames.
 #[derive(Debug, Clone, Default)]
 pub(super) struct Scratch {
-    /// Packed keys of the blocks each row tile touches and the number of pixels whose band
-    /// crosses each (sorted, unique after the tile pass).
+    /// Packed keys of the blocks each row tile touches and their support (pixels whose band
+    /// crosses each; sorted, unique after the tile pass).
     tiles: Vec<Vec<(u64, u32)>>,
-    /// All touched keys and their pixel counts, sorted and unique.
+    /// All touched keys and their support, sorted and unique.
     keys: Vec<(u64, u32)>,
     /// Storage index of each touched block (`u32::MAX` while unallocated).
     indices: Vec<u32>,
@@ -194,8 +194,9 @@ pub(super) fn integrate(
 }
 
 /// Fills `scratch.keys` with the packed keys (sorted, unique) of the blocks that the truncation
-/// band around the measured depths touches inside the ROI, each with the number of pixels
-/// whose band crosses it. Only the pixels of `window` are walked: it must hold every pixel
+/// band around the measured depths touches inside the ROI, each with its support: the number of
+/// pixels whose band crosses it, a precise pixel (see [`super::TsdfConfig::precise_depth_limit_m`])
+/// counting as `min_block_support` of them. Only the pixels of `window` are walked: it must hold every pixel
 /// whose band can reach a block of the ROI.
 fn touched_blocks(
     volume: &TsdfVolume,
@@ -226,6 +227,8 @@ fn touched_blocks(
     // A pixel's band [d − truncation, d + truncation] must reach the window's depth range.
     let min_depth_m = config.min_depth_m.max(window.near_m - truncation);
     let max_depth_m = config.max_depth_m.min(window.far_m + truncation);
+    let precise_depth_m = config.precise_depth_limit_m();
+    let min_support = config.min_block_support;
     let tiles = window.rows.len().div_ceil(ALLOCATION_ROWS);
     scratch.tiles.resize_with(tiles, Vec::new);
     let roi_blocks = config.roi.map(|roi| RoiBlocks::new(roi, config));
@@ -241,18 +244,21 @@ fn touched_blocks(
             // so only a cache miss pays for the ROI test and a push.
             let mut recent = [(u64::MAX, 0u32); 4];
             let mut slot = 0;
-            let mut visit = |b: BlockCoord| {
+            // `support`: what the pixel's band counts for, 1 or (precise) the whole minimum.
+            let mut visit = |b: BlockCoord, support: u32| {
                 let Some(key) = pack(b) else { return };
                 if let Some(entry) = recent.iter_mut().find(|(k, _)| *k == key) {
                     // Blocks outside the ROI stay at 0 and are never pushed.
-                    entry.1 += u32::from(entry.1 > 0);
+                    if entry.1 > 0 {
+                        entry.1 = entry.1.saturating_add(support);
+                    }
                     return;
                 }
                 let (old, count) = recent[slot];
                 if count > 0 {
                     keys.push((old, count));
                 }
-                recent[slot] = if in_roi(b) { (key, 1) } else { (key, 0) };
+                recent[slot] = if in_roi(b) { (key, support) } else { (key, 0) };
                 slot = (slot + 1) % recent.len();
             };
             let first_row = window.rows.start + tile * ALLOCATION_ROWS;
@@ -266,7 +272,8 @@ fn touched_blocks(
                         let a = origin + ray * (d - truncation);
                         let b = origin + ray * (d + truncation);
                         if roi_blocks.as_ref().is_none_or(|r| r.band_may_reach(&a, &b)) {
-                            walk_blocks(&a, &b, &mut visit);
+                            let support = if d <= precise_depth_m { min_support } else { 1 };
+                            walk_blocks(&a, &b, |cell| visit(cell, support));
                         }
                     }
                     ray += step_u;
@@ -417,12 +424,12 @@ impl PixelWindow {
     }
 }
 
-/// Sorts `(key, count)` pairs by key and sums the counts of equal keys.
+/// Sorts `(key, count)` pairs by key and sums the counts of equal keys (saturating).
 fn merge_counts(keys: &mut Vec<(u64, u32)>) {
     keys.par_sort_unstable_by_key(|&(k, _)| k);
     keys.dedup_by(|next, kept| {
         if next.0 == kept.0 {
-            kept.1 += next.1;
+            kept.1 = kept.1.saturating_add(next.1);
             true
         } else {
             false
@@ -705,7 +712,9 @@ impl Kernel {
                 let old = i32x8::new(row_color.map(|c| u32::from_le_bytes(c) as i32));
                 let new = i32x8::new(nearest.map(|i| rgbx[i as usize] as i32));
                 let byte = i32x8::splat(0xff);
-                let mut blended = i32x8::splat(0);
+                // The fourth byte counts the frames that observed the voxel, up to 255.
+                let count = ((old >> 24u32) & byte) + observed.select(one, zero).fast_trunc_int();
+                let mut blended = count.min(byte) << 24u32;
                 for shift in [0u32, 8, 16] {
                     let old = ((old >> shift) & byte).round_float();
                     let new = ((new >> shift) & byte).round_float();

@@ -7,7 +7,8 @@
 //!
 //! Each voxel stores the TSDF normalised by the truncation distance (in [−1, 1], negative inside
 //! the surface, i.e. behind it as seen from the camera), an accumulated weight (0 = never
-//! observed) and an sRGB colour kept as a weighted running average.
+//! observed), an sRGB colour kept as a weighted running average and the number of frames that
+//! observed it (saturating at 255; Open3D's weight, which meshing can threshold on).
 //!
 //! Integration ([`TsdfVolume::integrate`]) is projective and parallel over blocks; its result
 //! does not depend on the thread count. [`TsdfVolume::reintegrate`] rebuilds the volume from
@@ -114,7 +115,15 @@ pub struct TsdfConfig {
     /// seen by many pixels. Default 1 (every block any band touches). 4 cuts the noisy 12-frame
     /// full-frame orbit from 60k to 40k blocks (clean: 20.9k → 20.3k) but lowers the target's
     /// F-score at 1 cm by about 0.002 (fewer free-space observations near block corners).
+    /// With [`depth_sigma_at_1m_m`](Self::depth_sigma_at_1m_m) set, it applies only to noisy
+    /// pixels.
     pub min_block_support: u32,
+    /// The depth sensor's noise: σ of a depth measurement at 1 m, metres, for a sensor whose σ
+    /// grows as z² (stereo and structured light: σ_z = this · z²). A pixel whose σ is at most
+    /// the truncation distance cannot throw its band clear of the surface, so its band
+    /// allocates blocks on its own; only noisier (farther) pixels need the support of
+    /// `min_block_support` pixels. Default none (unknown: every pixel needs that support).
+    pub depth_sigma_at_1m_m: Option<f32>,
 }
 
 impl Default for TsdfConfig {
@@ -127,6 +136,7 @@ impl Default for TsdfConfig {
             max_depth_m: 10.0,
             roi: None,
             min_block_support: 1,
+            depth_sigma_at_1m_m: None,
         }
     }
 }
@@ -162,6 +172,11 @@ impl TsdfConfig {
         if self.min_block_support == 0 {
             return bad("min_block_support", 0.0, "must be ≥ 1");
         }
+        if let Some(sigma) = self.depth_sigma_at_1m_m
+            && !(sigma.is_finite() && sigma >= 0.0)
+        {
+            return bad("depth_sigma_at_1m_m", sigma, "must be finite and ≥ 0");
+        }
         if let Some(roi) = &self.roi {
             roi.validate()?;
         }
@@ -177,6 +192,18 @@ impl TsdfConfig {
     pub fn block_size_m(&self) -> f32 {
         self.voxel_size_m * BLOCK_SIDE as f32
     }
+
+    /// The farthest depth, metres, whose measurement σ (per
+    /// [`depth_sigma_at_1m_m`](Self::depth_sigma_at_1m_m)) is at most the truncation distance:
+    /// bands of nearer pixels allocate blocks without support. 0 when the noise is unknown,
+    /// infinite for a noise-free sensor.
+    pub fn precise_depth_limit_m(&self) -> f32 {
+        match self.depth_sigma_at_1m_m {
+            None => 0.0,
+            Some(sigma) if sigma > 0.0 => (self.truncation_m() / sigma).sqrt(),
+            Some(_) => f32::INFINITY,
+        }
+    }
 }
 
 /// One block of 8³ voxels, structure-of-arrays, indexed by `x + 8·y + 64·z` (local voxel
@@ -187,8 +214,9 @@ pub struct Block {
     pub tsdf: Box<[f32; BLOCK_VOXELS]>,
     /// Accumulated observation weight; 0 means never observed.
     pub weight: Box<[f32; BLOCK_VOXELS]>,
-    /// Weighted running-average sRGB colour, then a zero byte: a voxel's colour is one
-    /// little-endian 32-bit word, which the integration loads and stores eight at a time.
+    /// Weighted running-average sRGB colour, then the number of frames that observed the voxel
+    /// (saturating at 255): one little-endian 32-bit word per voxel, which the integration loads
+    /// and stores eight at a time. Read them with [`rgb_of`] and [`observations_of`].
     pub color: Box<[[u8; 4]; BLOCK_VOXELS]>,
 }
 
@@ -205,10 +233,17 @@ impl Block {
     pub const BYTES: usize = BLOCK_VOXELS * (4 + 4 + 4);
 }
 
-/// The sRGB colour of a stored voxel colour (r, g, b, pad).
+/// The sRGB colour of a stored voxel word (r, g, b, observations).
 #[inline]
 pub fn rgb_of([r, g, b, _]: [u8; 4]) -> [u8; 3] {
     [r, g, b]
+}
+
+/// The number of frames that observed a voxel (saturating at 255), from its stored word
+/// (r, g, b, observations).
+#[inline]
+pub fn observations_of([_, _, _, n]: [u8; 4]) -> u8 {
+    n
 }
 
 /// Index of local voxel (x, y, z) inside a block.
@@ -235,7 +270,7 @@ pub fn split_voxel(voxel: [i32; 3]) -> (BlockCoord, [usize; 3]) {
     (b, l)
 }
 
-/// A sampled voxel: TSDF (normalised), weight and colour.
+/// A sampled voxel: TSDF (normalised), weight, colour and observation count.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct VoxelSample {
     /// Normalised TSDF in [−1, 1].
@@ -244,6 +279,8 @@ pub struct VoxelSample {
     pub weight: f32,
     /// sRGB colour.
     pub color: [u8; 3],
+    /// Frames that observed the voxel, saturating at 255.
+    pub observations: u8,
 }
 
 /// Counts describing a volume's size.
@@ -342,15 +379,15 @@ impl TsdfVolume {
         }
     }
 
-    /// Stores block `coord` with the given voxels (TSDF, weight; colour grey), for tests that
-    /// need volumes no camera would produce.
+    /// Stores block `coord` with the given voxels (TSDF, weight, observations; colour grey), for
+    /// tests that need volumes no camera would produce.
     #[cfg(test)]
-    pub(crate) fn insert_block_for_test(&mut self, coord: BlockCoord, voxels: &[(f32, f32)]) {
+    pub(crate) fn insert_block_for_test(&mut self, coord: BlockCoord, voxels: &[(f32, f32, u8)]) {
         let mut block = Block::new();
-        for (i, &(t, w)) in voxels.iter().enumerate().take(BLOCK_VOXELS) {
+        for (i, &(t, w, n)) in voxels.iter().enumerate().take(BLOCK_VOXELS) {
             block.tsdf[i] = t;
             block.weight[i] = w;
-            block.color[i] = [128, 128, 128, 0];
+            block.color[i] = [128, 128, 128, n];
         }
         let i = self.blocks.len() as u32;
         self.index.insert(coord, i);
@@ -367,6 +404,7 @@ impl TsdfVolume {
             tsdf: block.tsdf[i],
             weight: block.weight[i],
             color: rgb_of(block.color[i]),
+            observations: observations_of(block.color[i]),
         })
     }
 

@@ -594,6 +594,101 @@ fn stray_pixels_do_not_allocate_blocks_with_support() {
 }
 
 #[test]
+fn precise_pixels_allocate_alone_and_noisy_ones_need_support() {
+    // One measured pixel at 1 m, nothing else: its band crosses a block or two, with a support
+    // of one pixel.
+    let cam = camera();
+    let mut depth = DepthImage::filled(cam.width, cam.height, 0.0);
+    *depth.get_mut(160, 120).unwrap() = 1.0;
+    let rgb = RgbImage::filled(cam.width, cam.height, COLOR);
+    let frame = RgbdFrame::new(0.0, rgb, depth, None).unwrap();
+    let blocks = |depth_sigma_at_1m_m| {
+        let mut volume = TsdfVolume::new(TsdfConfig {
+            min_block_support: 4,
+            depth_sigma_at_1m_m,
+            ..TsdfConfig::default()
+        })
+        .unwrap();
+        volume
+            .integrate(&frame, &cam, &Isometry3::identity())
+            .unwrap();
+        volume.block_count()
+    };
+    // Truncation 4 cm: σ(1 m) = 0.02 m is precise (limit √2 m), 0.05 m is not (limit 0.89 m).
+    let config = |sigma| TsdfConfig {
+        depth_sigma_at_1m_m: sigma,
+        ..TsdfConfig::default()
+    };
+    assert!((config(Some(0.02)).precise_depth_limit_m() - 2f32.sqrt()).abs() < 1e-5);
+    assert_eq!(config(Some(0.0)).precise_depth_limit_m(), f32::INFINITY);
+    assert_eq!(config(None).precise_depth_limit_m(), 0.0);
+    assert!(blocks(Some(0.02)) >= 1);
+    assert_eq!(blocks(Some(0.0)), blocks(Some(0.02)));
+    assert_eq!(blocks(Some(0.05)), 0);
+    assert_eq!(blocks(None), 0);
+    // The plane with strays 0.5 m behind it: a limit between the two (σ(1 m) = 0.0256 m, limit
+    // 1.25 m) keeps the plane's blocks and drops the strays', as a support of 4 for every pixel
+    // does.
+    let (frame, cam) = plane_with_strays(&[(40, 40), (160, 120), (250, 60)]);
+    let coords = |config: TsdfConfig| {
+        let mut volume = TsdfVolume::new(config).unwrap();
+        volume
+            .integrate(&frame, &cam, &Isometry3::identity())
+            .unwrap();
+        let mut c = volume.block_coords().to_vec();
+        c.sort_unstable();
+        c
+    };
+    let noise_aware = coords(TsdfConfig {
+        min_block_support: 4,
+        depth_sigma_at_1m_m: Some(0.0256),
+        ..TsdfConfig::default()
+    });
+    let supported = coords(TsdfConfig {
+        min_block_support: 4,
+        ..TsdfConfig::default()
+    });
+    assert_eq!(noise_aware, supported);
+    assert!(noise_aware.len() < coords(TsdfConfig::default()).len());
+    for bad in [f32::NAN, -0.01, f32::INFINITY] {
+        let err = TsdfVolume::new(config(Some(bad))).unwrap_err();
+        assert!(err.to_string().contains("depth_sigma_at_1m_m"), "{err}");
+    }
+}
+
+#[test]
+fn voxels_count_their_observations_and_meshing_thresholds_them() {
+    let (frame, cam) = plane_with_strays(&[]);
+    let pose = Isometry3::identity();
+    let mut volume = TsdfVolume::new(TsdfConfig::default()).unwrap();
+    let on_axis = [0, 0, 100];
+    let mesh = |volume: &TsdfVolume, min_observations| {
+        let config = MeshingConfig {
+            min_observations,
+            ..MeshingConfig::default()
+        };
+        extract_mesh(volume, &config).face_count()
+    };
+    for n in 1..=3u8 {
+        volume.integrate(&frame, &cam, &pose).unwrap();
+        assert_eq!(volume.voxel(on_axis).unwrap().observations, n);
+        // Voxels more than the truncation distance behind the plane are never observed.
+        assert_eq!(volume.voxel([0, 0, 106]).unwrap().observations, 0);
+        // The plane is meshed once it has been seen by `min_observations` frames.
+        assert_eq!(mesh(&volume, 3) > 0, n >= 3, "after {n} frames");
+    }
+    assert_eq!(mesh(&volume, 3), mesh(&volume, 0));
+    assert_eq!(mesh(&volume, 4), 0);
+    // The count saturates at 255 (it is one byte) without disturbing the colour.
+    for _ in 3..300 {
+        volume.integrate(&frame, &cam, &pose).unwrap();
+    }
+    let v = volume.voxel(on_axis).unwrap();
+    assert_eq!((v.observations, v.color), (255, COLOR));
+    assert_eq!(mesh(&volume, 255), mesh(&volume, 0));
+}
+
+#[test]
 fn colours_blend_by_weight() {
     // A frontal plane at 1 m seen twice from the same pose, in two colours: every observed
     // voxel takes the first colour, then the rounded mean (equal weights).
