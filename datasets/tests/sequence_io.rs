@@ -113,6 +113,15 @@ fn noisy_sequences_are_deterministic() {
     let estimate = seq.entries[0].world_from_camera_estimate.unwrap();
     let truth = seq.entries[0].world_from_camera_truth.unwrap();
     assert!((estimate.translation.vector - truth.translation.vector).norm() > 1e-3);
+    // camera.toml states the sensor's depth noise, σ at 1 m, for the TSDF's allocation.
+    let s = settings(true);
+    let sigma = s.sensor.depth_sigma_m(1.0, s.camera.fx);
+    assert!(sigma > 0.0);
+    assert_eq!(seq.camera_file.depth_sigma_at_1m_m, Some(sigma));
+    let c = temp_dir();
+    write_sequence(c.path(), &world, &poses, &settings(false), &|| {}).unwrap();
+    let clean = Sequence::open(c.path()).unwrap();
+    assert_eq!(clean.camera_file.depth_sigma_at_1m_m, Some(0.0));
 }
 
 fn expect_error(

@@ -33,6 +33,7 @@ Prints the median and p90 integration time per frame (block allocation + integra
 import argparse
 import atexit
 import json
+import math
 import shutil
 import subprocess
 import tempfile
@@ -85,7 +86,9 @@ def main():
     parser.add_argument("--roi", help="cyl:x,y,z_min,z_max,r or box:x0,y0,z0,x1,y1,z1 (metres)")
     parser.add_argument(
         "--weight-threshold", type=float, default=3.0,
-        help="Open3D meshing weight threshold (Open3D's default 3: voxels seen in < 3 frames)",
+        help="Open3D meshing weight threshold (Open3D's default 3: it meshes voxels whose weight, "
+             "one per frame, exceeds it, i.e. seen by 4 frames or more); --scarp meshes the same "
+             "voxels (scarp map --min-observations threshold + 1)",
     )
     parser.add_argument("--scarp-map", type=Path, help="scarp's map.json to print beside")
     parser.add_argument("--scarp", type=Path, help="scarp binary: run `scarp map` in this run")
@@ -130,6 +133,8 @@ def run_scarp_map(args):
                "--out", str(out), "--log", "warn"]
     if args.roi:
         command += ["--roi", args.roi]
+    # Open3D meshes weights above the threshold; scarp counts observations, at least N.
+    command += ["--min-observations", str(min(255, math.floor(args.weight_threshold) + 1))]
     subprocess.run(command, check=True, stdout=subprocess.DEVNULL)
     return out / "map.json"
 

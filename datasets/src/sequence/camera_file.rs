@@ -33,18 +33,18 @@ pub struct CameraFile {
     /// is not used as a bundle-adjustment residual.
     #[serde(default = "registered_by_default")]
     pub depth_registered: bool,
-    /// The colour camera, when it is not the depth camera (the `[color]` table). The top-level
-    /// intrinsics are then the depth camera's, and each frame's colour is registered to its
-    /// depth on load ([`scarp_slam::image::register_color_to_depth`]), so the frames a
-    /// [`super::Sequence`] yields are registered whatever `depth_registered` says.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub color: Option<ColorCameraFile>,
     /// The depth sensor's noise σ at 1 m, metres, for a σ growing as z² (stereo, structured
     /// light); 0 for exact depth. Absent when unknown (recorded and outside sequences).
     /// `scarp render` writes it from its sensor model. TSDF fusion uses it to tell precise
     /// pixels from noisy ones ([`scarp_slam::tsdf::TsdfConfig::depth_sigma_at_1m_m`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub depth_sigma_at_1m_m: Option<f64>,
+    /// The colour camera, when it is not the depth camera (the `[color]` table). The top-level
+    /// intrinsics are then the depth camera's, and each frame's colour is registered to its
+    /// depth on load ([`scarp_slam::image::register_color_to_depth`]), so the frames a
+    /// [`super::Sequence`] yields are registered whatever `depth_registered` says.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub color: Option<ColorCameraFile>,
 }
 
 /// The `[color]` table of `camera.toml`: the colour camera's intrinsics (pixels) and its pose
@@ -189,6 +189,14 @@ impl CameraFile {
                 ));
             }
         }
+        if let Some(sigma) = file.depth_sigma_at_1m_m
+            && !(sigma.is_finite() && sigma >= 0.0)
+        {
+            return Err(DatasetError::invalid(
+                format!("{}: depth_sigma_at_1m_m", path.display()),
+                "must be finite and ≥ 0",
+            ));
+        }
         if !(file.depth_scale > 0.0 && file.depth_scale.is_finite()) {
             return Err(DatasetError::invalid(
                 format!("{}: depth_scale", path.display()),
@@ -232,6 +240,37 @@ mod tests {
         file.write(&path).unwrap();
         assert_eq!(CameraFile::read(&path).unwrap(), file);
         assert!(!file.frames_registered());
+    }
+
+    #[test]
+    fn the_depth_noise_round_trips_and_must_be_finite() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("camera.toml");
+        let base = "fx = 585.0\nfy = 585.0\ncx = 320.0\ncy = 240.0\nwidth = 640\nheight = 480\n\
+                    depth_scale = 1000.0\n";
+        std::fs::write(&path, base).unwrap();
+        assert_eq!(CameraFile::read(&path).unwrap().depth_sigma_at_1m_m, None);
+        std::fs::write(&path, format!("{base}depth_sigma_at_1m_m = 0.0022\n")).unwrap();
+        let mut file = CameraFile::read(&path).unwrap();
+        assert_eq!(file.depth_sigma_at_1m_m, Some(0.0022));
+        // Written (before a [color] table) and read back.
+        file.color = Some(ColorCameraFile {
+            fx: 525.0,
+            fy: 525.0,
+            cx: 319.5,
+            cy: 239.5,
+            width: None,
+            height: None,
+            color_from_depth_translation_m: [0.0; 3],
+            color_from_depth_rotation_deg: [0.0; 3],
+        });
+        file.write(&path).unwrap();
+        assert_eq!(CameraFile::read(&path).unwrap(), file);
+        for bad in ["-0.001", "nan", "inf"] {
+            std::fs::write(&path, format!("{base}depth_sigma_at_1m_m = {bad}\n")).unwrap();
+            let err = CameraFile::read(&path).unwrap_err().to_string();
+            assert!(err.contains("depth_sigma_at_1m_m"), "{bad}: {err}");
+        }
     }
 
     #[test]
