@@ -225,12 +225,21 @@ impl CameraFile {
 mod tests {
     use super::*;
 
-    #[test]
-    fn depth_is_registered_unless_the_file_says_otherwise() {
+    /// A 7-Scenes-like camera file's required keys.
+    const KINECT_BASE: &str = "fx = 585.0\nfy = 585.0\ncx = 320.0\ncy = 240.0\nwidth = 640\n\
+                               height = 480\ndepth_scale = 1000.0\n";
+
+    /// A temporary directory (kept alive by the caller) and its `camera.toml` path.
+    fn temp_camera_file() -> (tempfile::TempDir, std::path::PathBuf) {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("camera.toml");
-        let base = "fx = 585.0\nfy = 585.0\ncx = 320.0\ncy = 240.0\nwidth = 640\nheight = 480\n\
-                    depth_scale = 1000.0\n";
+        (dir, path)
+    }
+
+    #[test]
+    fn depth_is_registered_unless_the_file_says_otherwise() {
+        let (_dir, path) = temp_camera_file();
+        let base = KINECT_BASE;
         std::fs::write(&path, base).unwrap();
         assert!(CameraFile::read(&path).unwrap().depth_registered);
         std::fs::write(&path, format!("{base}depth_registered = false\n")).unwrap();
@@ -244,10 +253,8 @@ mod tests {
 
     #[test]
     fn the_depth_noise_round_trips_and_must_be_finite() {
-        let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join("camera.toml");
-        let base = "fx = 585.0\nfy = 585.0\ncx = 320.0\ncy = 240.0\nwidth = 640\nheight = 480\n\
-                    depth_scale = 1000.0\n";
+        let (_dir, path) = temp_camera_file();
+        let base = KINECT_BASE;
         std::fs::write(&path, base).unwrap();
         assert_eq!(CameraFile::read(&path).unwrap().depth_sigma_at_1m_m, None);
         std::fs::write(&path, format!("{base}depth_sigma_at_1m_m = 0.0022\n")).unwrap();
