@@ -17,7 +17,7 @@ Setup (Debian):  apt-get install libusb-1.0-0 libgomp1
                  pip install open3d-cpu==0.19.0   (0.20's CPU wheel gives empty TSDF meshes)
 Usage:           scarp render --path orbit --frames 120 --seed 3 --out /tmp/orbit
                  python3 slam/benches/compare_open3d.py /tmp/orbit --voxel 0.01 --max-depth 8 \
-                     [--roi cyl:x,y,z0,z1,r] --scarp target/release/scarp
+                     [--roi cyl:x,y,z0,z1,r] --scarp target/release/scarp [--repeat 3]
                  or, from a map.json made beforehand:
                  scarp map /tmp/orbit --poses groundtruth --voxel 0.01 --out /tmp/map --json
                  python3 slam/benches/compare_open3d.py /tmp/orbit --voxel 0.01 [--frames N] \
@@ -92,14 +92,39 @@ def main():
     )
     parser.add_argument("--scarp-map", type=Path, help="scarp's map.json to print beside")
     parser.add_argument("--scarp", type=Path, help="scarp binary: run `scarp map` in this run")
+    parser.add_argument(
+        "--repeat", type=int, default=1,
+        help="with --scarp: rounds of scarp then Open3D, back to back; prints every round's "
+             "speed-ups and their median (a shared machine's load moves both tools' times)",
+    )
     args = parser.parse_args()
-    result = {"open3d": o3d.__version__}
-    if args.scarp:
-        if args.frames != 0:
-            # scarp map fuses the whole sequence: timing Open3D on fewer frames is not the same work.
-            parser.error("--scarp runs scarp map on every frame: use it with --frames 0")
-        args.scarp_map = run_scarp_map(args)
+    if args.repeat < 1:
+        parser.error("--repeat must be at least 1")
+    if args.repeat > 1 and not args.scarp:
+        parser.error("--repeat needs --scarp (both tools timed in each round)")
+    if args.scarp and args.frames != 0:
+        # scarp map fuses the whole sequence: timing Open3D on fewer frames is not the same work.
+        parser.error("--scarp runs scarp map on every frame: use it with --frames 0")
+    roi_text = args.roi
     args.roi = parse_roi(args.roi) if args.roi else None
+    rounds = []
+    for _ in range(args.repeat):
+        if args.scarp:
+            args.scarp_map = run_scarp_map(args, roi_text)
+        rounds.append(one_round(args))
+    result = rounds[-1]
+    if args.repeat > 1:
+        result["rounds"] = [r.get("open3d_over_scarp", {}) for r in rounds]
+        result["median_open3d_over_scarp"] = {
+            k: statistics.median(r["open3d_over_scarp"][k] for r in rounds)
+            for k in rounds[0].get("open3d_over_scarp", {})
+        }
+    print(json.dumps(result, indent=2))
+
+
+def one_round(args):
+    """Open3D's TSDF (and odometry) on the sequence, beside scarp's map.json when given."""
+    result = {"open3d": o3d.__version__}
     if args.frames >= 0:
         result.update(compare_tsdf(args))
     if args.odometry_pairs > 0:
@@ -119,10 +144,10 @@ def main():
             if ours_key in ours and k in result and ours[ours_key] > 0:
                 speedup[k] = result[k] / ours[ours_key]
         result["open3d_over_scarp"] = speedup
-    print(json.dumps(result, indent=2))
+    return result
 
 
-def run_scarp_map(args):
+def run_scarp_map(args, roi_text):
     """`scarp map` with ground-truth poses and the same voxel, depth range and region; returns
     the path of its map.json (in a temporary directory kept until the process ends)."""
     out = Path(tempfile.mkdtemp(prefix="scarp_map_"))
@@ -131,8 +156,8 @@ def run_scarp_map(args):
     command = [str(args.scarp.resolve()), "map", str(args.sequence), "--poses", "groundtruth",
                "--voxel", str(args.voxel), "--max-depth", str(args.max_depth),
                "--out", str(out), "--log", "warn"]
-    if args.roi:
-        command += ["--roi", args.roi]
+    if roi_text:
+        command += ["--roi", roi_text]
     # Open3D meshes weights above the threshold; scarp counts observations, at least N.
     command += ["--min-observations", str(min(255, math.floor(args.weight_threshold) + 1))]
     subprocess.run(command, check=True, stdout=subprocess.DEVNULL)
