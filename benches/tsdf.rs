@@ -3,10 +3,10 @@
 //! `compute_unique_block_coordinates` + `integrate` in `slam/benches/compare_open3d.py`), with
 //! the target's cylinder ROI and on the full frame to 8 m, each on clean depth and on depth with
 //! the default stereo noise; and marching cubes of the fused volumes (the target rock in its
-//! cylinder, ≤ 100 ms for a 2 m rock, and the noisy full frame). The settings are `scarp map`'s
-//! for a rendered sequence: the sensor's depth noise known (σ at 1 m from the stereo model, 0
-//! for clean depth) with a block support of 4 for noisy pixels, and meshing of the voxels seen
-//! by 3 frames or more.
+//! cylinder, ≤ 100 ms for a 2 m rock, and the noisy full frame). Integration uses `scarp map`'s
+//! settings for a rendered sequence: the sensor's depth noise known (σ at 1 m from the stereo
+//! model, 0 for clean depth), with a block support of 4 for noisy pixels. Meshing takes the
+//! voxels seen by 3 frames or more (`scarp map --min-observations 3`).
 //!
 //! `cargo bench --bench tsdf`
 

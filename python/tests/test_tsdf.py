@@ -73,3 +73,17 @@ def test_unknown_config_key_is_a_value_error():
         scarp.TsdfVolume(voxel_size_m=-1.0)
     with pytest.raises(ValueError, match="region of interest"):
         scarp.TsdfVolume(roi="sphere:1,2,3")
+
+
+def test_meshing_can_require_observations(plane_frames):
+    vol = scarp.TsdfVolume()
+    for depth, color, pose in plane_frames:
+        vol.integrate(depth, color, world_from_camera=pose, **INTRINSICS)
+    every = vol.extract_mesh()
+    # The middle of the plane is seen by all three frames; its sides by fewer.
+    seen_by_three = vol.extract_mesh(min_observations=3)
+    assert 0 < len(seen_by_three.triangles) < len(every.triangles)
+    assert len(vol.extract_mesh(min_observations=4).triangles) == 0
+    for bad in (-1, 256, True):
+        with pytest.raises(ValueError, match="min_observations"):
+            vol.extract_mesh(min_observations=bad)
