@@ -207,7 +207,7 @@ class TsdfVolume:
             min_component_triangles: drop connected components with fewer triangles
                 (``scarp map`` uses 200).
             min_observations: only voxels observed by at least this many frames take part
-                (0 to 255; Open3D's ``weight_threshold``).
+                (0 to 255; Open3D's ``weight_threshold`` t keeps what t + 1 keeps here).
         """
         for name, value, top in (
             ("min_component_triangles", min_component_triangles, None),

@@ -112,6 +112,9 @@ def main():
         if args.scarp:
             args.scarp_map = run_scarp_map(args, roi_text)
         rounds.append(one_round(args))
+        if args.scarp:
+            # Read: its meshes need not wait for the exit (hundreds of MB on a full frame).
+            shutil.rmtree(args.scarp_map.parent, ignore_errors=True)
     result = rounds[-1]
     if args.repeat > 1:
         result["rounds"] = [r.get("open3d_over_scarp", {}) for r in rounds]

@@ -34,7 +34,8 @@ pub struct MeshingConfig {
     /// (any observation).
     pub min_weight: f32,
     /// A voxel takes part only when at least this many frames observed it (counts saturate at
-    /// 255). Default 0 (any observation). Open3D's `weight_threshold` counts the same way.
+    /// 255). Default 0 (any observation). Open3D's `weight_threshold` t keeps weights above t,
+    /// one per frame: the voxels this keeps at t + 1.
     pub min_observations: u8,
     /// Connected components with fewer triangles than this are dropped. Default 0 (keep all);
     /// `scarp map` uses 200 to remove floating noise.

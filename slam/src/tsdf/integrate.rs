@@ -195,9 +195,10 @@ pub(super) fn integrate(
 
 /// Fills `scratch.keys` with the packed keys (sorted, unique) of the blocks that the truncation
 /// band around the measured depths touches inside the ROI, each with its support: the number of
-/// pixels whose band crosses it, a precise pixel (see [`super::TsdfConfig::precise_depth_limit_m`])
-/// counting as `min_block_support` of them. Only the pixels of `window` are walked: it must hold every pixel
-/// whose band can reach a block of the ROI.
+/// pixels whose band crosses it, a precise pixel (see
+/// [`super::TsdfConfig::precise_depth_limit_m`]) counting as `min_block_support` of them. Only
+/// the pixels of `window` are walked: it must hold every pixel whose band can reach a block of
+/// the ROI.
 fn touched_blocks(
     volume: &TsdfVolume,
     scratch: &mut Scratch,
