@@ -61,7 +61,7 @@ impl SensorConfig {
         let sigma_px = self.disparity_sigma_px.max(0.0);
         let edge_threshold = probability_threshold(self.edge_dropout_probability);
         let random_threshold = probability_threshold(self.random_dropout_probability);
-        let normal = NormalQuantiles::new();
+        let normal = NormalQuantiles::shared();
         let mut out = src.to_vec();
         out.par_chunks_mut(w).enumerate().for_each(|(v, row)| {
             for (u, value) in row.iter_mut().enumerate() {
@@ -152,6 +152,13 @@ struct NormalQuantiles {
 impl NormalQuantiles {
     const CELL_BITS: u32 = 12;
     const EXACT_END_CELLS: usize = 64;
+
+    /// The table, built once per process: it is the same for every frame, and building it cost
+    /// a serial tenth of a millisecond or more per frame.
+    fn shared() -> &'static Self {
+        static TABLE: std::sync::OnceLock<NormalQuantiles> = std::sync::OnceLock::new();
+        TABLE.get_or_init(Self::new)
+    }
 
     fn new() -> Self {
         let cells = 1u32 << Self::CELL_BITS;

@@ -2,22 +2,42 @@
 //! pedestals, so that images carry corners and texture for tracking and photometric odometry.
 
 use rayon::prelude::*;
+use wide::{f32x4, i32x4};
 
 use crate::noise::{derive_seed, fbm_2d, fbm_3d, value_noise_2d, value_noise_3d};
 use crate::terrain::Heightfield;
 use crate::world::TextureConfig;
 
-/// A baked terrain albedo map over the heightfield's extent, 8-bit sRGB, row-major from the
-/// south-west corner.
+/// A baked terrain albedo map over the heightfield's extent, 8-bit sRGB, from the south-west
+/// corner.
+///
+/// Texels are stored in square tiles of [`TILE`]² texels, each with the next tile's first row
+/// and column as an apron, so a bilinear sample reads one tile. A frame's samples follow lines
+/// across the map at any heading; row-major storage put each texel row on its own page, and the
+/// renderer stalled on the texture (about a quarter of a frame).
 #[derive(Debug, Clone)]
 pub struct AlbedoMap {
     origin_x_m: f64,
     origin_y_m: f64,
-    texel_m: f64,
-    nx: usize,
-    ny: usize,
-    texels: Vec<[u8; 3]>,
+    /// `1 / texel size`, so a sample multiplies rather than divides.
+    inv_texel: f64,
+    /// The largest grid coordinates a sample's lower corner may take: just inside the last
+    /// cell, so the cell index needs no second clamp.
+    gx_max: f64,
+    gy_max: f64,
+    /// Tiles along x.
+    tiles_x: usize,
+    /// RGB and a zero byte, [`TILE_TEXELS`] a tile: a texel is one 32-bit load, its channels
+    /// one set of lanes.
+    texels: Vec<[u8; 4]>,
 }
+
+/// Texels along a tile's side, without its apron.
+const TILE: usize = 16;
+/// A tile's row, apron included.
+const TILE_ROW: usize = TILE + 1;
+/// A tile's texels, apron included.
+const TILE_TEXELS: usize = TILE_ROW * TILE_ROW;
 
 fn mix(a: [u8; 3], b: [u8; 3], t: f32) -> [f32; 3] {
     [0, 1, 2].map(|i| f32::from(a[i]) + (f32::from(b[i]) - f32::from(a[i])) * t)
@@ -93,48 +113,124 @@ impl AlbedoMap {
         let texel_m = config.terrain_texel_m.max(1e-3);
         let nx = ((x1 - x0) / texel_m).ceil() as usize + 1;
         let ny = ((y1 - y0) / texel_m).ceil() as usize + 1;
-        let texels = (0..ny)
+        let row_major: Vec<[u8; 4]> = (0..ny)
             .into_par_iter()
             .flat_map_iter(|j| {
                 (0..nx).map(move |i| {
-                    terrain_albedo(config, x0 + i as f64 * texel_m, y0 + j as f64 * texel_m)
+                    let [r, g, b] =
+                        terrain_albedo(config, x0 + i as f64 * texel_m, y0 + j as f64 * texel_m);
+                    [r, g, b, 0]
                 })
             })
             .collect();
+        // A sample's lower corner is at most (nx − 2, ny − 2), so its tile is at most that
+        // corner's; apron texels beyond the map repeat its edge and are never weighted.
+        let tiles_x = nx.saturating_sub(2) / TILE + 1;
+        let tiles_y = ny.saturating_sub(2) / TILE + 1;
+        let mut texels = vec![[0u8; 4]; tiles_x * tiles_y * TILE_TEXELS];
+        texels
+            .par_chunks_mut(TILE_TEXELS)
+            .enumerate()
+            .for_each(|(tile, out)| {
+                let (ti, tj) = (tile % tiles_x, tile / tiles_x);
+                for (k, texel) in out.iter_mut().enumerate() {
+                    let i = (ti * TILE + k % TILE_ROW).min(nx - 1);
+                    let j = (tj * TILE + k / TILE_ROW).min(ny - 1);
+                    *texel = row_major[j * nx + i];
+                }
+            });
         Self {
             origin_x_m: x0,
             origin_y_m: y0,
-            texel_m,
-            nx,
-            ny,
+            inv_texel: 1.0 / texel_m,
+            gx_max: (nx - 1) as f64 - 1e-9,
+            gy_max: (ny - 1) as f64 - 1e-9,
+            tiles_x,
             texels,
         }
     }
 
     /// Bilinear albedo at (x, y), clamped to the map's edge.
+    ///
+    /// Runs for every terrain pixel of every rendered frame: the three channels are one set of
+    /// SIMD lanes, summed corner by corner in the order of a per-channel loop, so the result is
+    /// bit for bit the scalar one.
+    #[inline]
     pub fn sample(&self, x_m: f64, y_m: f64) -> [f32; 3] {
-        // Clamped just inside the last cell, so the cell index needs no second clamp; an i32
-        // cast is cheaper than a usize one and the maps are far smaller than 2³¹ texels a side.
-        let inv_texel = 1.0 / self.texel_m;
-        let gx = ((x_m - self.origin_x_m) * inv_texel)
-            .min((self.nx - 1) as f64 - 1e-9)
+        // An i32 cast is cheaper than a usize one and the maps are far smaller than 2³¹ texels
+        // a side.
+        let gx = ((x_m - self.origin_x_m) * self.inv_texel)
+            .min(self.gx_max)
             .max(0.0);
-        let gy = ((y_m - self.origin_y_m) * inv_texel)
-            .min((self.ny - 1) as f64 - 1e-9)
+        let gy = ((y_m - self.origin_y_m) * self.inv_texel)
+            .min(self.gy_max)
             .max(0.0);
         let (i, j) = (gx as i32 as usize, gy as i32 as usize);
         let (fx, fy) = ((gx - i as f64) as f32, (gy - j as f64) as f32);
-        // Runs for every terrain pixel of every frame: two row slices (two bounds checks) and
-        // the four corner weights once, not per channel.
-        let south = &self.texels[j * self.nx + i..j * self.nx + i + 2];
-        let north = &self.texels[(j + 1) * self.nx + i..(j + 1) * self.nx + i + 2];
+        // One slice of the tile (one bounds check) and the four corner weights once.
+        let tile = (j / TILE) * self.tiles_x + i / TILE;
+        let first = tile * TILE_TEXELS + (j % TILE) * TILE_ROW + i % TILE;
+        let quad = &self.texels[first..first + TILE_ROW + 2];
+        let (south, north) = (&quad[..2], &quad[TILE_ROW..]);
+        let lanes = |texel: [u8; 4]| f32x4::from_i32x4(i32x4::new(texel.map(i32::from)));
+        let weight = f32x4::splat;
+        let out = lanes(south[0]) * weight((1.0 - fx) * (1.0 - fy))
+            + lanes(south[1]) * weight(fx * (1.0 - fy))
+            + lanes(north[0]) * weight((1.0 - fx) * fy)
+            + lanes(north[1]) * weight(fx * fy);
+        let [r, g, b, _] = out.to_array();
+        [r, g, b]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use proptest::prelude::*;
+
+    use super::*;
+
+    /// A map of 59 × 44 texels: several tiles each way, neither a whole number of tiles.
+    fn small_map() -> (TextureConfig, Heightfield, AlbedoMap) {
+        let config = TextureConfig::default();
+        let heightfield = Heightfield::flat(-3.0, 5.0, 0.1, 24, 18, 0.0).expect("heightfield");
+        let map = AlbedoMap::bake(&config, &heightfield);
+        (config, heightfield, map)
+    }
+
+    /// The bilinear sample as a per-channel loop over the texels evaluated where they lie.
+    fn reference(
+        config: &TextureConfig,
+        heightfield: &Heightfield,
+        x_m: f64,
+        y_m: f64,
+    ) -> [f32; 3] {
+        let (x0, y0, x1, y1) = heightfield.extent();
+        let texel_m = config.terrain_texel_m;
+        let nx = ((x1 - x0) / texel_m).ceil() as usize + 1;
+        let ny = ((y1 - y0) / texel_m).ceil() as usize + 1;
+        let gx = ((x_m - x0) * (1.0 / texel_m))
+            .min((nx - 1) as f64 - 1e-9)
+            .max(0.0);
+        let gy = ((y_m - y0) * (1.0 / texel_m))
+            .min((ny - 1) as f64 - 1e-9)
+            .max(0.0);
+        let (i, j) = (gx as usize, gy as usize);
+        let (fx, fy) = ((gx - i as f64) as f32, (gy - j as f64) as f32);
+        let texel = |i: usize, j: usize| {
+            terrain_albedo(config, x0 + i as f64 * texel_m, y0 + j as f64 * texel_m)
+        };
+        let corners = [
+            texel(i, j),
+            texel(i + 1, j),
+            texel(i, j + 1),
+            texel(i + 1, j + 1),
+        ];
         let weights = [
             (1.0 - fx) * (1.0 - fy),
             fx * (1.0 - fy),
             (1.0 - fx) * fy,
             fx * fy,
         ];
-        let corners = [south[0], south[1], north[0], north[1]];
         let mut out = [0.0f32; 3];
         for (texel, weight) in corners.iter().zip(weights) {
             for (o, &c) in out.iter_mut().zip(texel) {
@@ -142,5 +238,36 @@ impl AlbedoMap {
             }
         }
         out
+    }
+
+    #[test]
+    fn a_sample_on_a_texel_is_that_texel() {
+        let (config, _, map) = small_map();
+        for (i, j) in [(0, 0), (15, 0), (16, 17), (31, 32), (57, 42)] {
+            let (x, y) = (-3.0 + i as f64 * 0.04, 5.0 + j as f64 * 0.04);
+            let expected = terrain_albedo(&config, x, y).map(f32::from);
+            let got = map.sample(x, y);
+            for c in 0..3 {
+                assert!(
+                    (got[c] - expected[c]).abs() < 1e-3,
+                    "texel ({i}, {j}): {got:?} vs {expected:?}"
+                );
+            }
+        }
+    }
+
+    proptest! {
+        /// The tiled map samples bit for bit as the row-major bilinear sample, across tile
+        /// seams, on the map's last row and column, and clamped outside it.
+        #[test]
+        fn tiled_samples_equal_the_row_major_bilinear_sample(
+            x in -3.5f64..-0.4,
+            y in 4.5f64..7.2,
+        ) {
+            let (config, heightfield, map) = small_map();
+            let got = map.sample(x, y);
+            let expected = reference(&config, &heightfield, x, y);
+            prop_assert_eq!(got.map(f32::to_bits), expected.map(f32::to_bits));
+        }
     }
 }
