@@ -11,7 +11,7 @@ use crate::world::TextureConfig;
 /// A baked terrain albedo map over the heightfield's extent, 8-bit sRGB, from the south-west
 /// corner.
 ///
-/// Texels are stored in square tiles of [`TILE`]² texels, each with the next tile's first row
+/// Texels are stored in square tiles of 16 × 16 texels, each with the next tile's first row
 /// and column as an apron, so a bilinear sample reads one tile. A frame's samples follow lines
 /// across the map at any heading; row-major storage put each texel row on its own page, and the
 /// renderer stalled on the texture (about a quarter of a frame).
@@ -27,7 +27,7 @@ pub struct AlbedoMap {
     gy_max: f64,
     /// Tiles along x.
     tiles_x: usize,
-    /// RGB and a zero byte, [`TILE_TEXELS`] a tile: a texel is one 32-bit load, its channels
+    /// RGB and a zero byte, 17² a tile (apron included): a texel is one 32-bit load, its channels
     /// one set of lanes.
     texels: Vec<[u8; 4]>,
 }

@@ -152,7 +152,8 @@ def one_round(args):
 
 def run_scarp_map(args, roi_text):
     """`scarp map` with ground-truth poses and the same voxel, depth range and region; returns
-    the path of its map.json (in a temporary directory kept until the process ends)."""
+    the path of its map.json (in a temporary directory: the caller removes it once the round is
+    read, and it is removed at exit otherwise)."""
     out = Path(tempfile.mkdtemp(prefix="scarp_map_"))
     atexit.register(shutil.rmtree, out, ignore_errors=True)
     # Resolved: `Path("./scarp")` prints as "scarp", which subprocess would look up on PATH.
