@@ -1,7 +1,7 @@
 //! Rendering throughput: RGB, depth and instance ids at 640×480 of the default world from
 //! lawn-mower sweeps at the mission's search height (10 m) and at 20 m, and from the close orbit
 //! around the first target, as the mapping views see it (budget: ≥ 100 frames/s on 2 cores,
-//! i.e. ≤ 10 ms a frame).
+//! i.e. ≤ 10 ms a frame); and the orbit's depth and instances alone, without shading.
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use scarp_datasets::paths;
@@ -33,6 +33,16 @@ fn bench_render(c: &mut Criterion) {
             })
         });
     }
+    // Depth and instances only, as the evaluation's visibility test renders them.
+    let mut k = 0;
+    group.bench_function("orbit_4m_geometry_only", |b| {
+        b.iter(|| {
+            k = (k + 1) % orbit.len();
+            renderer
+                .render_geometry(&camera, &orbit[k].world_from_camera)
+                .expect("render")
+        })
+    });
     group.finish();
 }
 

@@ -297,3 +297,30 @@ fn rendering_does_not_depend_on_the_thread_count() {
     assert_eq!(one.depth_m, three.depth_m);
     assert_eq!(one.instance, three.instance);
 }
+
+#[test]
+fn a_geometry_render_is_the_full_renders_depth_and_instances() {
+    let world = World::builtin_default().unwrap();
+    let renderer = Renderer::new(&world);
+    let cam = camera();
+    let target = world.targets().next().unwrap();
+    // A close oblique view (rock, pedestal, terrain and sky), one from above, one grazing.
+    let views = [
+        (Vector3::new(-3.0, 2.0, 2.0), target.centroid),
+        (Vector3::new(0.5, 0.0, 12.0), target.centroid),
+        (
+            Vector3::new(6.0, -4.0, 0.4),
+            target.centroid + Vector3::new(30.0, -20.0, 0.0),
+        ),
+    ];
+    for (offset, look) in views {
+        let pose = look_at(&(target.centroid + offset), &look, &Vector3::z()).unwrap();
+        let full = renderer.render(&cam, &pose).unwrap();
+        let geometry = renderer.render_geometry(&cam, &pose).unwrap();
+        assert!(full.depth_m.as_slice().iter().any(|&d| d > 0.0));
+        assert_eq!(full.depth_m, geometry.depth_m);
+        assert_eq!(full.instance, geometry.instance);
+    }
+    let bad = Isometry3::translation(f64::NAN, 0.0, 0.0);
+    assert!(renderer.render_geometry(&cam, &bad).is_err());
+}

@@ -317,7 +317,7 @@ impl Visibility<'_> {
         let mut visible = vec![false; points.len()];
         let (w, h) = (self.camera.width as i64, self.camera.height as i64);
         for pose in &self.world_from_camera {
-            let depth = renderer.render(&self.camera, pose)?.depth_m;
+            let depth = renderer.render_geometry(&self.camera, pose)?.depth_m;
             let camera_from_world = pose.inverse();
             visible.par_iter_mut().zip(points).for_each(|(vis, p)| {
                 if *vis {

@@ -30,6 +30,16 @@ use raster::{
 /// Near clipping distance, metres.
 pub const NEAR_PLANE_M: f64 = 0.05;
 
+/// What a geometry-only render produces ([`Renderer::render_geometry`]): the depth and
+/// instance images of [`RenderOutput`], bit for bit, without the shading.
+#[derive(Debug, Clone)]
+pub struct GeometryOutput {
+    /// z-depth in metres along the camera z axis; 0.0 where nothing is hit.
+    pub depth_m: DepthImage,
+    /// Instance id per pixel (see [`crate::world::TERRAIN_INSTANCE_ID`]); 0 where nothing is hit.
+    pub instance: MaskImage,
+}
+
 /// What one render produces. All images share the camera's size.
 #[derive(Debug, Clone)]
 pub struct RenderOutput {
@@ -162,11 +172,61 @@ impl<'w> Renderer<'w> {
         camera: &PinholeCamera,
         world_from_camera: &Isometry3<f64>,
     ) -> Result<RenderOutput, DatasetError> {
+        let triangles = self.visible_triangles(camera, world_from_camera)?;
+        let (w, h) = (camera.width, camera.height);
+        let mut rgb = RgbImage::filled(w, h, [0, 0, 0]);
+        let mut depth_m = DepthImage::filled(w, h, 0.0);
+        let mut instance = MaskImage::filled(w, h, 0);
+        self.draw(
+            camera,
+            world_from_camera,
+            &triangles,
+            Some(rgb.as_mut_slice()),
+            depth_m.as_mut_slice(),
+            instance.as_mut_slice(),
+        );
+        Ok(RenderOutput {
+            rgb,
+            depth_m,
+            instance,
+        })
+    }
+
+    /// The depth and instance images of [`Self::render`], bit for bit, without shading: for
+    /// visibility and occlusion tests, where the colour's texture lookups would be two thirds
+    /// of the drawing time.
+    ///
+    /// # Errors
+    /// [`DatasetError::Geometry`] for invalid intrinsics or a non-finite pose.
+    pub fn render_geometry(
+        &self,
+        camera: &PinholeCamera,
+        world_from_camera: &Isometry3<f64>,
+    ) -> Result<GeometryOutput, DatasetError> {
+        let triangles = self.visible_triangles(camera, world_from_camera)?;
+        let (w, h) = (camera.width, camera.height);
+        let mut depth_m = DepthImage::filled(w, h, 0.0);
+        let mut instance = MaskImage::filled(w, h, 0);
+        self.draw(
+            camera,
+            world_from_camera,
+            &triangles,
+            None,
+            depth_m.as_mut_slice(),
+            instance.as_mut_slice(),
+        );
+        Ok(GeometryOutput { depth_m, instance })
+    }
+
+    /// Checks the inputs and sets up the triangles in view.
+    fn visible_triangles(
+        &self,
+        camera: &PinholeCamera,
+        world_from_camera: &Isometry3<f64>,
+    ) -> Result<Vec<SetupTriangle>, DatasetError> {
         camera.validate()?;
         scarp_slam::geometry::check_finite_isometry(world_from_camera, "world_from_camera")?;
-        let camera_from_world = world_from_camera.inverse();
-        let triangles = self.setup(camera, &camera_from_world);
-        Ok(self.draw(camera, world_from_camera, &triangles))
+        Ok(self.setup(camera, &world_from_camera.inverse()))
     }
 
     /// Ambient plus Lambert light at the corners of a face, from its vertex normals (or its face
@@ -260,15 +320,19 @@ impl<'w> Renderer<'w> {
         per_chunk.concat()
     }
 
-    /// Rasterizes and resolves the image band by band (32 rows each), in parallel.
+    /// Rasterizes and resolves the images band by band (32 rows each), in parallel, into
+    /// buffers of the camera's size: colour only when `rgb` is given.
     fn draw(
         &self,
         camera: &PinholeCamera,
         world_from_camera: &Isometry3<f64>,
         triangles: &[SetupTriangle],
-    ) -> RenderOutput {
-        let (w, h) = (camera.width, camera.height);
-        let band_len = w as usize * TILE_SIZE as usize;
+        rgb: Option<&mut [[u8; 3]]>,
+        depth_m: &mut [f32],
+        instance: &mut [u16],
+    ) {
+        let h = camera.height;
+        let band_len = camera.width as usize * TILE_SIZE as usize;
         let mut bands: Vec<Vec<u32>> = vec![Vec::new(); h.div_ceil(TILE_SIZE) as usize];
         for (index, t) in triangles.iter().enumerate() {
             for band in
@@ -278,16 +342,18 @@ impl<'w> Renderer<'w> {
             }
         }
         let view = ViewRays::new(camera, world_from_camera);
-        let mut rgb = RgbImage::filled(w, h, [0, 0, 0]);
-        let mut depth = DepthImage::filled(w, h, 0.0);
-        let mut instance = MaskImage::filled(w, h, 0);
-        rgb.as_mut_slice()
+        // Each band's rows of the colour image, or none for every band.
+        let rgb_bands: Vec<Option<&mut [[u8; 3]]>> = match rgb {
+            Some(rgb) => rgb.chunks_mut(band_len).map(Some).collect(),
+            None => bands.iter().map(|_| None).collect(),
+        };
+        depth_m
             .par_chunks_mut(band_len)
-            .zip(depth.as_mut_slice().par_chunks_mut(band_len))
-            .zip(instance.as_mut_slice().par_chunks_mut(band_len))
+            .zip(instance.par_chunks_mut(band_len))
+            .zip(rgb_bands.into_par_iter())
             .zip(bands.par_iter())
             .enumerate()
-            .for_each(|(band, (((rgb, depth_m), instance), in_band))| {
+            .for_each(|(band, (((depth_m, instance), rgb), in_band))| {
                 let mut out = BandOutput {
                     rgb,
                     depth_m,
@@ -295,11 +361,6 @@ impl<'w> Renderer<'w> {
                 };
                 self.draw_band(camera, &view, triangles, in_band, band as u32, &mut out);
             });
-        RenderOutput {
-            rgb,
-            depth_m: depth,
-            instance,
-        }
     }
 
     /// Bins a band's triangles into its tiles, then rasterizes and resolves tile by tile.
@@ -333,7 +394,9 @@ impl<'w> Renderer<'w> {
                     let (u, v) = (f64::from(x0 + column), f64::from(y0 + row));
                     let winner = tile.winners[slot];
                     if winner == u32::MAX {
-                        out.rgb[pixel] = view.sky(u, v);
+                        if let Some(rgb) = out.rgb.as_deref_mut() {
+                            rgb[pixel] = view.sky(u, v);
+                        }
                         continue;
                     }
                     let t = &triangles[winner as usize];
@@ -341,10 +404,12 @@ impl<'w> Renderer<'w> {
                         .shading
                         .depth_m(u, v)
                         .unwrap_or_else(|| 1.0 / f64::from(tile.inv_depth[slot]));
-                    let light = t.shading.light(u, v, z);
                     let layer = &self.layers[t.layer as usize];
-                    let albedo = self.albedo(layer.material, &view.world_point(u, v, z));
-                    out.rgb[pixel] = albedo.map(|a| (a * light + 0.5).clamp(0.0, 255.0) as u8);
+                    if let Some(rgb) = out.rgb.as_deref_mut() {
+                        let light = t.shading.light(u, v, z);
+                        let albedo = self.albedo(layer.material, &view.world_point(u, v, z));
+                        rgb[pixel] = albedo.map(|a| (a * light + 0.5).clamp(0.0, 255.0) as u8);
+                    }
                     out.depth_m[pixel] = z as f32;
                     out.instance[pixel] = layer.instance_id;
                 }
@@ -368,9 +433,9 @@ impl<'w> Renderer<'w> {
     }
 }
 
-/// One band's rows of the three output images.
+/// One band's rows of the output images (colour only when shading).
 struct BandOutput<'a> {
-    rgb: &'a mut [[u8; 3]],
+    rgb: Option<&'a mut [[u8; 3]]>,
     depth_m: &'a mut [f32],
     instance: &'a mut [u16],
 }
