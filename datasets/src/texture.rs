@@ -172,7 +172,13 @@ impl AlbedoMap {
         let first = tile * TILE_TEXELS + (j % TILE) * TILE_ROW + i % TILE;
         let quad = &self.texels[first..first + TILE_ROW + 2];
         let (south, north) = (&quad[..2], &quad[TILE_ROW..]);
-        let lanes = |texel: [u8; 4]| f32x4::from_i32x4(i32x4::new(texel.map(i32::from)));
+        // A texel's bytes as lanes without a scalar unpacking: each lane masks its byte in place,
+        // converts (exactly: below 2²⁴) and scales back by a power of two (exactly).
+        let byte_masks = i32x4::new([0xff, 0xff00, 0xff_0000, 0]);
+        let byte_scales = f32x4::new([1.0, 1.0 / 256.0, 1.0 / 65536.0, 0.0]);
+        let lanes = |texel: [u8; 4]| {
+            f32x4::from_i32x4(i32x4::splat(i32::from_le_bytes(texel)) & byte_masks) * byte_scales
+        };
         let weight = f32x4::splat;
         let out = lanes(south[0]) * weight((1.0 - fx) * (1.0 - fy))
             + lanes(south[1]) * weight(fx * (1.0 - fy))
