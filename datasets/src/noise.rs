@@ -93,15 +93,27 @@ pub fn fbm_2d(seed: u64, x: f64, y: f64, wavelength: f64, octaves: u32) -> f32 {
 
 /// Fractal sum of 3D value noise, as [`fbm_2d`].
 pub fn fbm_3d(seed: u64, x: f64, y: f64, z: f64, wavelength: f64, octaves: u32) -> f32 {
+    fbm_3d_of_octaves(
+        (0..octaves).map(|octave| derive_seed(seed, u64::from(octave))),
+        x,
+        y,
+        z,
+        wavelength,
+    )
+}
+
+/// [`fbm_3d`] with its octaves' seeds given (`derive_seed(seed, octave)` for octave 0, 1, …), so
+/// a caller sampling one field many times derives them once.
+pub fn fbm_3d_of_octaves(
+    octave_seeds: impl IntoIterator<Item = u64>,
+    x: f64,
+    y: f64,
+    z: f64,
+    wavelength: f64,
+) -> f32 {
     let (mut sum, mut amplitude, mut total, mut frequency) = (0.0, 1.0, 0.0, 1.0 / wavelength);
-    for octave in 0..octaves {
-        sum += amplitude
-            * value_noise_3d(
-                derive_seed(seed, u64::from(octave)),
-                x * frequency,
-                y * frequency,
-                z * frequency,
-            );
+    for octave_seed in octave_seeds {
+        sum += amplitude * value_noise_3d(octave_seed, x * frequency, y * frequency, z * frequency);
         total += amplitude;
         amplitude *= 0.5;
         frequency *= 2.0;

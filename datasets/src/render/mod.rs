@@ -21,7 +21,7 @@ use scarp_slam::image::{DepthImage, MaskImage, RgbImage};
 use scarp_slam::{PinholeCamera, TriangleMesh};
 
 use crate::DatasetError;
-use crate::texture::rock_albedo;
+use crate::texture::RockTexture;
 use crate::world::{PEDESTAL_INSTANCE_OFFSET, TERRAIN_INSTANCE_ID, World};
 use raster::{
     SetupTriangle, TILE_SIZE, TileBuffer, affine, along_ray, rasterize_tile, setup_triangle,
@@ -85,6 +85,7 @@ struct Chunk {
 pub struct Renderer<'w> {
     world: &'w World,
     layers: Vec<Layer<'w>>,
+    rock_texture: RockTexture,
 }
 
 fn chunk_faces(mesh: &TriangleMesh, cell_m: f64) -> (Vec<[u32; 3]>, Vec<Chunk>) {
@@ -160,7 +161,11 @@ impl<'w> Renderer<'w> {
                 );
             }
         }
-        Self { world, layers }
+        Self {
+            world,
+            layers,
+            rock_texture: RockTexture::new(texture),
+        }
     }
 
     /// Renders the world seen by `camera` at `world_from_camera`.
@@ -421,14 +426,10 @@ impl<'w> Renderer<'w> {
     fn albedo(&self, material: Material, p_world: &Point3<f64>) -> [f32; 3] {
         match material {
             Material::Terrain => self.world.terrain_albedo.sample(p_world.x, p_world.y),
-            Material::Solid(base) => rock_albedo(
-                &self.world.config.texture,
-                base,
-                p_world.x,
-                p_world.y,
-                p_world.z,
-            )
-            .map(f32::from),
+            Material::Solid(base) => self
+                .rock_texture
+                .albedo(base, p_world.x, p_world.y, p_world.z)
+                .map(f32::from),
         }
     }
 }
