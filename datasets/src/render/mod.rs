@@ -69,6 +69,10 @@ struct Layer<'w> {
     faces: Vec<[u32; 3]>,
     /// Contiguous face ranges with their bounds.
     chunks: Vec<Chunk>,
+    /// Ambient plus Lambert light of each vertex (from its normal), or of each reordered face
+    /// (from the face normal) when the mesh has no normals: the sun and the world stand still,
+    /// so it is computed once, not at every visible corner of every frame.
+    light: Vec<f32>,
 }
 
 /// Faces `start..end` of a layer's reordered faces, inside the box `lo..hi` (world metres).
@@ -131,12 +135,14 @@ impl<'w> Renderer<'w> {
         let mut add =
             |mesh: &'w TriangleMesh, instance_id: u16, material: Material, cell_m: f64| {
                 let (faces, chunks) = chunk_faces(mesh, cell_m);
+                let light = Self::precomputed_light(world, mesh, &faces);
                 layers.push(Layer {
                     mesh,
                     instance_id,
                     material,
                     faces,
                     chunks,
+                    light,
                 });
             };
         add(
@@ -234,20 +240,38 @@ impl<'w> Renderer<'w> {
         Ok(self.setup(camera, &world_from_camera.inverse()))
     }
 
-    /// Ambient plus Lambert light at the corners of a face, from its vertex normals (or its face
-    /// normal when the mesh has none).
-    fn corner_light(&self, layer: &Layer, face: &[u32; 3]) -> [f32; 3] {
-        let sun = self.world.sun_direction;
-        let ambient = self.world.config.sun.ambient as f32;
+    /// A layer's [`Layer::light`]: per vertex from the vertex normals, or per face (in the
+    /// order of `faces`) from the face normals when the mesh has none.
+    fn precomputed_light(world: &World, mesh: &TriangleMesh, faces: &[[u32; 3]]) -> Vec<f32> {
+        let sun = world.sun_direction;
+        let ambient = world.config.sun.ambient as f32;
         let light = |n: Vector3<f64>| {
             let lambert = (n.dot(&sun) / n.norm().max(1e-12)).max(0.0) as f32;
             ambient + (1.0 - ambient) * lambert
         };
-        if layer.mesh.normals.is_empty() {
-            let p = face.map(|v| layer.mesh.positions[v as usize].cast::<f64>());
-            [light((p[1] - p[0]).cross(&(p[2] - p[0]))); 3]
+        if mesh.normals.is_empty() {
+            faces
+                .iter()
+                .map(|face| {
+                    let p = face.map(|v| mesh.positions[v as usize].cast::<f64>());
+                    light((p[1] - p[0]).cross(&(p[2] - p[0])))
+                })
+                .collect()
         } else {
-            face.map(|v| light(layer.mesh.normals[v as usize].cast::<f64>()))
+            mesh.normals
+                .iter()
+                .map(|n| light(n.cast::<f64>()))
+                .collect()
+        }
+    }
+
+    /// Ambient plus Lambert light at the corners of face `index` (of the layer's reordered
+    /// faces).
+    fn corner_light(layer: &Layer, index: usize) -> [f32; 3] {
+        if layer.mesh.normals.is_empty() {
+            [layer.light[index]; 3]
+        } else {
+            layer.faces[index].map(|v| layer.light[v as usize])
         }
     }
 
@@ -309,14 +333,14 @@ impl<'w> Renderer<'w> {
                 let layer = &self.layers[l];
                 let Chunk { start, end, .. } = layer.chunks[c];
                 let mut out = Vec::new();
-                for face in &layer.faces[start..end] {
+                for (index, face) in layer.faces.iter().enumerate().take(end).skip(start) {
                     let corners = face.map(|v| {
                         Point3::from(
                             rotation * layer.mesh.positions[v as usize].coords.cast::<f64>()
                                 + translation,
                         )
                     });
-                    let light = || self.corner_light(layer, face);
+                    let light = || Self::corner_light(layer, index);
                     setup_triangle(camera, &corners, l as u16, NEAR_PLANE_M, light, &mut out);
                 }
                 out
