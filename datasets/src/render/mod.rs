@@ -183,23 +183,12 @@ impl<'w> Renderer<'w> {
         camera: &PinholeCamera,
         world_from_camera: &Isometry3<f64>,
     ) -> Result<RenderOutput, DatasetError> {
-        let triangles = self.visible_triangles(camera, world_from_camera)?;
-        let (w, h) = (camera.width, camera.height);
-        let mut rgb = RgbImage::filled(w, h, [0, 0, 0]);
-        let mut depth_m = DepthImage::filled(w, h, 0.0);
-        let mut instance = MaskImage::filled(w, h, 0);
-        self.draw(
-            camera,
-            world_from_camera,
-            &triangles,
-            Some(rgb.as_mut_slice()),
-            depth_m.as_mut_slice(),
-            instance.as_mut_slice(),
-        );
+        let mut rgb = RgbImage::filled(camera.width, camera.height, [0, 0, 0]);
+        let geometry = self.render_into(camera, world_from_camera, Some(&mut rgb))?;
         Ok(RenderOutput {
             rgb,
-            depth_m,
-            instance,
+            depth_m: geometry.depth_m,
+            instance: geometry.instance,
         })
     }
 
@@ -214,6 +203,16 @@ impl<'w> Renderer<'w> {
         camera: &PinholeCamera,
         world_from_camera: &Isometry3<f64>,
     ) -> Result<GeometryOutput, DatasetError> {
+        self.render_into(camera, world_from_camera, None)
+    }
+
+    /// Renders depth and instances, and colour into `rgb` (of the camera's size) when given.
+    fn render_into(
+        &self,
+        camera: &PinholeCamera,
+        world_from_camera: &Isometry3<f64>,
+        rgb: Option<&mut RgbImage>,
+    ) -> Result<GeometryOutput, DatasetError> {
         let triangles = self.visible_triangles(camera, world_from_camera)?;
         let (w, h) = (camera.width, camera.height);
         let mut depth_m = DepthImage::filled(w, h, 0.0);
@@ -222,7 +221,7 @@ impl<'w> Renderer<'w> {
             camera,
             world_from_camera,
             &triangles,
-            None,
+            rgb.map(|rgb| rgb.as_mut_slice()),
             depth_m.as_mut_slice(),
             instance.as_mut_slice(),
         );
