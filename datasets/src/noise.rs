@@ -54,44 +54,22 @@ pub fn value_noise_2d(seed: u64, x: f64, y: f64) -> f32 {
 
 /// 3D value noise in [−1, 1] with quintic interpolation; one lattice cell per unit.
 pub fn value_noise_3d(seed: u64, x: f64, y: f64, z: f64) -> f32 {
-    value_noise_3d_cached(seed, x, y, z, &mut LatticeCell::default())
-}
-
-/// The lattice values at the eight corners of one cell of a 3D value-noise field: neighbouring
-/// samples of a fine field (a rendered surface's pixels) mostly fall in the cell of the sample
-/// before, and then reuse its corners instead of hashing them again.
-#[derive(Debug, Clone, Default)]
-pub struct LatticeCell {
-    /// The field's seed and the cell's lower corner; `None` before the first sample.
-    key: Option<(u64, [i64; 3])>,
-    /// Corner (i, j, k) of the cell at index i + 2j + 4k.
-    corners: [f32; 8],
-}
-
-/// [`value_noise_3d`], bit for bit, reusing `cell`'s corners when (x, y, z) falls in the same
-/// cell of the same field, and caching the new cell's otherwise.
-pub fn value_noise_3d_cached(seed: u64, x: f64, y: f64, z: f64, cell: &mut LatticeCell) -> f32 {
     let (xi, yi, zi) = (floor_i64(x), floor_i64(y), floor_i64(z));
     let (tx, ty, tz) = (
         smooth((x - xi as f64) as f32),
         smooth((y - yi as f64) as f32),
         smooth((z - zi as f64) as f32),
     );
-    let key = (seed, [xi, yi, zi]);
-    if cell.key != Some(key) {
-        cell.key = Some(key);
-        cell.corners = std::array::from_fn(|k| {
-            let (i, j, l) = ((k & 1) as i64, ((k >> 1) & 1) as i64, (k >> 2) as i64);
-            lattice(seed, xi + i, yi + j, zi + l)
-        });
-    }
-    let c = &cell.corners;
-    let plane = |base: usize| {
-        let a = lerp(c[base], c[base + 1], tx);
-        let b = lerp(c[base + 2], c[base + 3], tx);
+    let plane = |zi| {
+        let a = lerp(lattice(seed, xi, yi, zi), lattice(seed, xi + 1, yi, zi), tx);
+        let b = lerp(
+            lattice(seed, xi, yi + 1, zi),
+            lattice(seed, xi + 1, yi + 1, zi),
+            tx,
+        );
         lerp(a, b, ty)
     };
-    lerp(plane(0), plane(4), tz)
+    lerp(plane(zi), plane(zi + 1), tz)
 }
 
 /// Fractal sum of `octaves` 2D value-noise layers, each at twice the frequency and half the
@@ -117,7 +95,6 @@ pub fn fbm_2d(seed: u64, x: f64, y: f64, wavelength: f64, octaves: u32) -> f32 {
 pub fn fbm_3d(seed: u64, x: f64, y: f64, z: f64, wavelength: f64, octaves: u32) -> f32 {
     fbm_3d_of_octaves(
         (0..octaves).map(|octave| derive_seed(seed, u64::from(octave))),
-        &mut [],
         x,
         y,
         z,
@@ -126,24 +103,17 @@ pub fn fbm_3d(seed: u64, x: f64, y: f64, z: f64, wavelength: f64, octaves: u32) 
 }
 
 /// [`fbm_3d`] with its octaves' seeds given (`derive_seed(seed, octave)` for octave 0, 1, …), so
-/// a caller sampling one field many times derives them once, and a lattice cell cached per
-/// octave (see [`value_noise_3d_cached`]; octaves beyond the cells given are not cached).
+/// a caller sampling one field many times derives them once.
 pub fn fbm_3d_of_octaves(
     octave_seeds: impl IntoIterator<Item = u64>,
-    cells: &mut [LatticeCell],
     x: f64,
     y: f64,
     z: f64,
     wavelength: f64,
 ) -> f32 {
     let (mut sum, mut amplitude, mut total, mut frequency) = (0.0, 1.0, 0.0, 1.0 / wavelength);
-    for (octave, octave_seed) in octave_seeds.into_iter().enumerate() {
-        let (x, y, z) = (x * frequency, y * frequency, z * frequency);
-        sum += amplitude
-            * match cells.get_mut(octave) {
-                Some(cell) => value_noise_3d_cached(octave_seed, x, y, z, cell),
-                None => value_noise_3d(octave_seed, x, y, z),
-            };
+    for octave_seed in octave_seeds {
+        sum += amplitude * value_noise_3d(octave_seed, x * frequency, y * frequency, z * frequency);
         total += amplitude;
         amplitude *= 0.5;
         frequency *= 2.0;
@@ -154,26 +124,6 @@ pub fn fbm_3d_of_octaves(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use proptest::prelude::*;
-
-    proptest! {
-        /// A walk of nearby samples through one cached cell (staying in a cell, stepping to the
-        /// next, switching fields) gives each sample's uncached value bit for bit.
-        #[test]
-        fn cached_samples_equal_uncached_ones(
-            start in prop::array::uniform3(-40.0f64..40.0),
-            steps in prop::collection::vec((prop::array::uniform3(-0.4f64..0.4), 0u64..3), 1..60),
-        ) {
-            let mut cell = LatticeCell::default();
-            let mut p = start;
-            for (step, seed) in steps {
-                p = [p[0] + step[0], p[1] + step[1], p[2] + step[2]];
-                let cached = value_noise_3d_cached(seed, p[0], p[1], p[2], &mut cell);
-                let fresh = value_noise_3d(seed, p[0], p[1], p[2]);
-                prop_assert_eq!(cached.to_bits(), fresh.to_bits());
-            }
-        }
-    }
 
     #[test]
     fn noise_is_bounded_deterministic_and_continuous() {

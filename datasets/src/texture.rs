@@ -4,9 +4,7 @@
 use rayon::prelude::*;
 use wide::{f32x4, i32x4};
 
-use crate::noise::{
-    LatticeCell, derive_seed, fbm_2d, fbm_3d_of_octaves, value_noise_2d, value_noise_3d_cached,
-};
+use crate::noise::{derive_seed, fbm_2d, fbm_3d_of_octaves, value_noise_2d, value_noise_3d};
 use crate::terrain::Heightfield;
 use crate::world::TextureConfig;
 
@@ -92,14 +90,7 @@ pub fn terrain_albedo(config: &TextureConfig, x_m: f64, y_m: f64) -> [u8; 3] {
 /// Solid-texture albedo of a rock or pedestal surface point (world metres): base colour with
 /// coarse mottling, lichen-dark patches and mineral grain.
 pub fn rock_albedo(config: &TextureConfig, base: [u8; 3], x_m: f64, y_m: f64, z_m: f64) -> [u8; 3] {
-    RockTexture::new(config).albedo(base, x_m, y_m, z_m, &mut RockTextureCells::default())
-}
-
-/// The noise cells of [`RockTexture`]'s last sample (the coarse octaves', then the grain's),
-/// kept by a caller that samples neighbouring points in turn (a renderer's pixels).
-#[derive(Debug, Clone, Default)]
-pub struct RockTextureCells {
-    cells: [LatticeCell; 3],
+    RockTexture::new(config).albedo(base, x_m, y_m, z_m)
 }
 
 /// [`rock_albedo`]'s field with its noise seeds derived once: the renderer samples it at every
@@ -127,33 +118,17 @@ impl RockTexture {
         }
     }
 
-    /// The albedo of a surface point (world metres) of base colour `base`, as [`rock_albedo`]
-    /// (bit for bit), reusing the noise cells of the caller's previous sample where they hold.
-    pub fn albedo(
-        &self,
-        base: [u8; 3],
-        x_m: f64,
-        y_m: f64,
-        z_m: f64,
-        cells: &mut RockTextureCells,
-    ) -> [u8; 3] {
-        let (coarse_cells, grain_cell) = cells.cells.split_at_mut(2);
+    /// The albedo of a surface point (world metres) of base colour `base`, as [`rock_albedo`].
+    pub fn albedo(&self, base: [u8; 3], x_m: f64, y_m: f64, z_m: f64) -> [u8; 3] {
         let coarse = fbm_3d_of_octaves(
             self.coarse_seeds,
-            coarse_cells,
             x_m,
             y_m,
             z_m,
             self.variation_wavelength_m,
         );
         let s = self.speckle_wavelength_m;
-        let grain = value_noise_3d_cached(
-            self.grain_seed,
-            x_m / s,
-            y_m / s,
-            z_m / s,
-            &mut grain_cell[0],
-        );
+        let grain = value_noise_3d(self.grain_seed, x_m / s, y_m / s, z_m / s);
         let crystal = if grain > 0.55 {
             0.45
         } else if grain < -0.6 {

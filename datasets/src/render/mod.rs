@@ -21,7 +21,7 @@ use scarp_slam::image::{DepthImage, MaskImage, RgbImage};
 use scarp_slam::{PinholeCamera, TriangleMesh};
 
 use crate::DatasetError;
-use crate::texture::{RockTexture, RockTextureCells};
+use crate::texture::RockTexture;
 use crate::world::{PEDESTAL_INSTANCE_OFFSET, TERRAIN_INSTANCE_ID, World};
 use raster::{
     SetupTriangle, TILE_SIZE, TileBuffer, affine, along_ray, rasterize_tile, setup_triangle,
@@ -409,7 +409,6 @@ impl<'w> Renderer<'w> {
             }
         }
         let mut tile = TileBuffer::new();
-        let mut rock_cells = RockTextureCells::default();
         let y0 = band * TILE_SIZE;
         let rows = (camera.height - y0).min(TILE_SIZE);
         for (tx, bin) in bins.iter().enumerate() {
@@ -436,11 +435,7 @@ impl<'w> Renderer<'w> {
                     let layer = &self.layers[t.layer as usize];
                     if let Some(rgb) = out.rgb.as_deref_mut() {
                         let light = t.shading.light(u, v, z);
-                        let albedo = self.albedo(
-                            layer.material,
-                            &view.world_point(u, v, z),
-                            &mut rock_cells,
-                        );
+                        let albedo = self.albedo(layer.material, &view.world_point(u, v, z));
                         rgb[pixel] = albedo.map(|a| (a * light + 0.5).clamp(0.0, 255.0) as u8);
                     }
                     out.depth_m[pixel] = z as f32;
@@ -450,19 +445,13 @@ impl<'w> Renderer<'w> {
         }
     }
 
-    /// Albedo (0–255 per channel) of a material at a world point; `rock_cells` holds the rock
-    /// noise cells of the band's previous rock pixel.
-    fn albedo(
-        &self,
-        material: Material,
-        p_world: &Point3<f64>,
-        rock_cells: &mut RockTextureCells,
-    ) -> [f32; 3] {
+    /// Albedo (0–255 per channel) of a material at a world point.
+    fn albedo(&self, material: Material, p_world: &Point3<f64>) -> [f32; 3] {
         match material {
             Material::Terrain => self.world.terrain_albedo.sample(p_world.x, p_world.y),
             Material::Solid(base) => self
                 .rock_texture
-                .albedo(base, p_world.x, p_world.y, p_world.z, rock_cells)
+                .albedo(base, p_world.x, p_world.y, p_world.z)
                 .map(f32::from),
         }
     }
