@@ -91,6 +91,10 @@ def main():
              "voxels (scarp map --min-observations threshold + 1)",
     )
     parser.add_argument("--scarp-map", type=Path, help="scarp's map.json to print beside")
+    parser.add_argument(
+        "--save-mesh", type=Path,
+        help="write Open3D's mesh (PLY) here, to score it beside scarp's with `scarp eval mesh`",
+    )
     parser.add_argument("--scarp", type=Path, help="scarp binary: run `scarp map` in this run")
     parser.add_argument(
         "--repeat", type=int, default=1,
@@ -300,6 +304,8 @@ def compare_tsdf(args):
     start = time.perf_counter()
     mesh = vbg.extract_triangle_mesh(weight_threshold=args.weight_threshold)
     mesh_ms = (time.perf_counter() - start) * 1e3
+    if args.save_mesh:
+        o3d.io.write_triangle_mesh(str(args.save_mesh), mesh.to_legacy())
     times_ms.sort()
     return {
         "frames": n,
