@@ -87,14 +87,10 @@ pub fn terrain_albedo(config: &TextureConfig, x_m: f64, y_m: f64) -> [u8; 3] {
     scale_color(base, shade)
 }
 
-/// Solid-texture albedo of a rock or pedestal surface point (world metres): base colour with
-/// coarse mottling, lichen-dark patches and mineral grain.
-pub fn rock_albedo(config: &TextureConfig, base: [u8; 3], x_m: f64, y_m: f64, z_m: f64) -> [u8; 3] {
-    RockTexture::new(config).albedo(base, x_m, y_m, z_m)
-}
-
-/// [`rock_albedo`]'s field with its noise seeds derived once: the renderer samples it at every
-/// rock pixel, where deriving them cost a quarter of the hashing.
+/// The solid texture of rock and pedestal surfaces: base colour with coarse mottling,
+/// lichen-dark patches and mineral grain. Its noise seeds are derived once, when it is built:
+/// the renderer samples it at every rock pixel, where deriving them cost a quarter of the
+/// hashing.
 #[derive(Debug, Clone)]
 pub struct RockTexture {
     /// The coarse mottling's two octaves.
@@ -111,6 +107,8 @@ impl RockTexture {
         let seed = derive_seed(config.seed, 10);
         Self {
             coarse_seeds: [derive_seed(seed, 0), derive_seed(seed, 1)],
+            // The grain shares the second octave's seed, as it always has: another seed would
+            // change every rendered rock.
             grain_seed: derive_seed(seed, 1),
             variation_wavelength_m: config.variation_wavelength_m,
             speckle_wavelength_m: config.speckle_wavelength_m,
@@ -118,7 +116,7 @@ impl RockTexture {
         }
     }
 
-    /// The albedo of a surface point (world metres) of base colour `base`, as [`rock_albedo`].
+    /// The albedo (8-bit sRGB) of a surface point (world metres) of base colour `base`.
     pub fn albedo(&self, base: [u8; 3], x_m: f64, y_m: f64, z_m: f64) -> [u8; 3] {
         let coarse = fbm_3d_of_octaves(
             self.coarse_seeds,

@@ -69,10 +69,16 @@ struct Layer<'w> {
     faces: Vec<[u32; 3]>,
     /// Contiguous face ranges with their bounds.
     chunks: Vec<Chunk>,
-    /// Ambient plus Lambert light of each vertex (from its normal), or of each reordered face
-    /// (from the face normal) when the mesh has no normals: the sun and the world stand still,
-    /// so it is computed once, not at every visible corner of every frame.
-    light: Vec<f32>,
+    /// The layer's light, computed once: the sun and the world stand still.
+    light: LayerLight,
+}
+
+/// Ambient plus Lambert light of a layer's surface, in [0, 1].
+enum LayerLight {
+    /// Per vertex, from the mesh's vertex normals.
+    PerVertex(Vec<f32>),
+    /// Per face of the layer's reordered faces, from the face normals (a mesh without normals).
+    PerFace(Vec<f32>),
 }
 
 /// Faces `start..end` of a layer's reordered faces, inside the box `lo..hi` (world metres).
@@ -239,9 +245,9 @@ impl<'w> Renderer<'w> {
         Ok(self.setup(camera, &world_from_camera.inverse()))
     }
 
-    /// A layer's [`Layer::light`]: per vertex from the vertex normals, or per face (in the
-    /// order of `faces`) from the face normals when the mesh has none.
-    fn precomputed_light(world: &World, mesh: &TriangleMesh, faces: &[[u32; 3]]) -> Vec<f32> {
+    /// A layer's light: per vertex from the vertex normals, or per face (in the order of
+    /// `faces`) from the face normals when the mesh has none.
+    fn precomputed_light(world: &World, mesh: &TriangleMesh, faces: &[[u32; 3]]) -> LayerLight {
         let sun = world.sun_direction;
         let ambient = world.config.sun.ambient as f32;
         let light = |n: Vector3<f64>| {
@@ -249,28 +255,31 @@ impl<'w> Renderer<'w> {
             ambient + (1.0 - ambient) * lambert
         };
         if mesh.normals.is_empty() {
-            faces
-                .iter()
-                .map(|face| {
-                    let p = face.map(|v| mesh.positions[v as usize].cast::<f64>());
-                    light((p[1] - p[0]).cross(&(p[2] - p[0])))
-                })
-                .collect()
+            LayerLight::PerFace(
+                faces
+                    .iter()
+                    .map(|face| {
+                        let p = face.map(|v| mesh.positions[v as usize].cast::<f64>());
+                        light((p[1] - p[0]).cross(&(p[2] - p[0])))
+                    })
+                    .collect(),
+            )
         } else {
-            mesh.normals
-                .iter()
-                .map(|n| light(n.cast::<f64>()))
-                .collect()
+            LayerLight::PerVertex(
+                mesh.normals
+                    .iter()
+                    .map(|n| light(n.cast::<f64>()))
+                    .collect(),
+            )
         }
     }
 
     /// Ambient plus Lambert light at the corners of face `index` (of the layer's reordered
     /// faces).
     fn corner_light(layer: &Layer, index: usize) -> [f32; 3] {
-        if layer.mesh.normals.is_empty() {
-            [layer.light[index]; 3]
-        } else {
-            layer.faces[index].map(|v| layer.light[v as usize])
+        match &layer.light {
+            LayerLight::PerVertex(light) => layer.faces[index].map(|v| light[v as usize]),
+            LayerLight::PerFace(light) => [light[index]; 3],
         }
     }
 
@@ -332,7 +341,8 @@ impl<'w> Renderer<'w> {
                 let layer = &self.layers[l];
                 let Chunk { start, end, .. } = layer.chunks[c];
                 let mut out = Vec::new();
-                for (index, face) in layer.faces.iter().enumerate().take(end).skip(start) {
+                for (offset, face) in layer.faces[start..end].iter().enumerate() {
+                    let index = start + offset;
                     let corners = face.map(|v| {
                         Point3::from(
                             rotation * layer.mesh.positions[v as usize].coords.cast::<f64>()
