@@ -14,7 +14,13 @@ use scarp_planning::plot::{PlotConfig, PlotScene, write_side_view_png, write_top
 use scarp_planning::prelude::*;
 use serde::Serialize;
 
+use scarp::mission::config::{CylinderEstimateConfig, MissionConfig};
 use scarp::mission::environment::planning_environment;
+use scarp::mission::mapping::{cylinder_around, cylinder_radius_m};
+use scarp_datasets::world::Rock;
+use scarp_planning::camera::body_from_camera_at_pitch;
+
+use crate::simulate::load_config;
 
 /// Plan and fly the mapping rings around a target.
 #[derive(Debug, Args)]
@@ -35,38 +41,41 @@ pub struct PlanArgs {
     /// Output directory.
     #[arg(long)]
     pub out: PathBuf,
+    /// A mission configuration (TOML, as `scarp simulate --config` takes): its `[planning]`
+    /// and `[cylinder]` tables and `map_camera_rate_hz` are used; other tables are checked.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
     /// Print `flight.json` on stdout.
     #[arg(long)]
     pub json: bool,
 }
 
-/// The vertical bounding cylinder of a mesh's vertices about its centroid's axis.
-fn bounding_cylinder(
-    mesh: &scarp_slam::TriangleMesh,
-    axis_xy: [f64; 2],
+/// The cylinder a mission maps rock `rock` in, built as the mission builds it
+/// ([`cylinder_radius_m`], [`cylinder_around`]) but from the truth: the rock's centroid for
+/// the localized centre, its mesh's vertices for the localized points, and the terrain under
+/// the centroid for the ground the depth camera measures.
+fn mission_cylinder(
+    world: &World,
+    rock: &Rock,
+    config: &CylinderEstimateConfig,
 ) -> anyhow::Result<VerticalCylinder> {
-    let (lo, hi) = mesh.bounds().context("the target mesh is empty")?;
-    let radius = mesh
-        .positions
-        .iter()
-        .map(|p| (f64::from(p.x) - axis_xy[0]).hypot(f64::from(p.y) - axis_xy[1]))
-        .fold(0.0, f64::max);
-    Ok(VerticalCylinder::new(
-        axis_xy[0],
-        axis_xy[1],
-        radius,
-        f64::from(lo.z),
-        f64::from(hi.z),
-    )?)
+    let points: Vec<Point3<f64>> = rock.mesh.positions.iter().map(|p| p.cast()).collect();
+    let radius_m = cylinder_radius_m(&points, &rock.centroid, config);
+    let ground_m = world.terrain_height_m(rock.centroid.x, rock.centroid.y);
+    Ok(cylinder_around(&rock.centroid, radius_m, ground_m, config)?)
 }
 
 /// The target cylinder named by `--target`.
-fn target_cylinder(world: &World, args: &PlanArgs) -> anyhow::Result<VerticalCylinder> {
+fn target_cylinder(
+    world: &World,
+    args: &PlanArgs,
+    config: &MissionConfig,
+) -> anyhow::Result<VerticalCylinder> {
     if let Ok(id) = args.target.parse::<u32>() {
         let rock = world
             .rock(id)
             .with_context(|| format!("--target {id}: the world has no rock {id}"))?;
-        return bounding_cylinder(&rock.mesh, [rock.centroid.x, rock.centroid.y]);
+        return mission_cylinder(world, rock, &config.cylinder);
     }
     let values: Vec<f64> = args
         .target
@@ -94,6 +103,7 @@ fn target_cylinder(world: &World, args: &PlanArgs) -> anyhow::Result<VerticalCyl
 struct FlightReport<'a> {
     #[serde(flatten)]
     metrics: &'a FlightMetrics,
+    cylinder: &'a VerticalCylinder,
     rings: usize,
     waypoints: usize,
     trajectory_duration_s: f64,
@@ -119,6 +129,29 @@ fn world_from_body(position: &Point3<f64>, yaw_rad: f64) -> Isometry3<f64> {
     )
 }
 
+/// The camera's poses along `trajectory`, one every `1 / rate_hz` seconds: the level body at
+/// each sample, and the mount pitched as the mission points it while flying `rings`
+/// ([`RingPlan::camera_pitch_down_deg_at`]; the mount's slew rate is not modelled).
+fn camera_poses(
+    trajectory: &Trajectory,
+    rings: &RingPlan,
+    camera: &CameraConfig,
+    rate_hz: f64,
+) -> Vec<StampedPose> {
+    trajectory
+        .sample_uniform(1.0 / rate_hz)
+        .iter()
+        .map(|s| {
+            let pitch_deg = rings.camera_pitch_down_deg_at(s.position_m.z, camera.pitch_down_deg);
+            StampedPose {
+                timestamp_s: s.time_s,
+                world_from_camera: world_from_body(&s.position_m, s.yaw_rad)
+                    * body_from_camera_at_pitch(pitch_deg.to_radians()),
+            }
+        })
+        .collect()
+}
+
 /// Runs `scarp plan`.
 ///
 /// # Errors
@@ -126,9 +159,10 @@ fn world_from_body(position: &Point3<f64>, yaw_rad: f64) -> Isometry3<f64> {
 pub fn run(args: PlanArgs) -> anyhow::Result<()> {
     let world = World::from_name_or_path(&args.world)
         .with_context(|| format!("loading world `{}`", args.world))?;
-    let cylinder = target_cylinder(&world, &args)?;
+    let mission_config = load_config(args.config.as_ref())?;
+    let cylinder = target_cylinder(&world, &args, &mission_config)?;
     let env = planning_environment(&world)?;
-    let config = PlanningConfig::default();
+    let config = &mission_config.planning;
     // Start at search altitude, east of the target, facing it.
     let start_xy = (
         cylinder.center_x_m + cylinder.radius_m + 10.0,
@@ -211,6 +245,16 @@ pub fn run(args: PlanArgs) -> anyhow::Result<()> {
         &poses,
         "planned world_from_body (level, yaw only), ENU metres",
     )?;
+    write_tum_trajectory(
+        &args.out.join("camera_trajectory.txt"),
+        &camera_poses(
+            &trajectory,
+            &rings,
+            &config.camera,
+            mission_config.map_camera_rate_hz,
+        ),
+        "planned world_from_camera (OpenCV axes; the mount pitched as on the rings), ENU metres",
+    )?;
     let scene = PlotScene {
         cylinder: Some(cylinder),
         rings: rings.rings.clone(),
@@ -223,6 +267,7 @@ pub fn run(args: PlanArgs) -> anyhow::Result<()> {
     write_side_view_png(&args.out.join("side.png"), &scene, Some(&env), &plot)?;
     let report = FlightReport {
         metrics: &flight.metrics,
+        cylinder: &cylinder,
         rings: rings.rings.len(),
         waypoints: rings.path.waypoints.len(),
         trajectory_duration_s: trajectory.duration_s(),

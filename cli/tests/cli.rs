@@ -219,16 +219,46 @@ fn plan_flies_the_mapping_rings_of_a_target() {
         "waypoints.csv",
         "trajectory.csv",
         "trajectory.txt",
+        "camera_trajectory.txt",
         "top.png",
         "side.png",
     ] {
         assert!(dir.path().join(file).exists(), "{file}");
     }
+    let body = scarp_export::tum::read_tum_trajectory(&dir.path().join("trajectory.txt")).unwrap();
+    assert!(!body.is_empty());
+    // The camera flies with the body, at the mission's 20 Hz mapping rate, its optical axis
+    // pitched below the horizon (never above it on these rings), yawed as the body.
+    let camera =
+        scarp_export::tum::read_tum_trajectory(&dir.path().join("camera_trajectory.txt")).unwrap();
+    let duration_s = flight["trajectory_duration_s"].as_f64().unwrap();
+    // One pose every 0.05 s from 0 to the end, the end included.
+    let expected = duration_s * 20.0 + 1.0;
     assert!(
-        !scarp_export::tum::read_tum_trajectory(&dir.path().join("trajectory.txt"))
-            .unwrap()
-            .is_empty()
+        (camera.len() as f64 - expected).abs() <= 1.0,
+        "{} poses over {duration_s} s",
+        camera.len()
     );
+    for pose in camera.iter().step_by(97) {
+        let t = pose.world_from_camera.translation.vector;
+        let b = body
+            .iter()
+            .min_by(|a, b| {
+                (a.timestamp_s - pose.timestamp_s)
+                    .abs()
+                    .total_cmp(&(b.timestamp_s - pose.timestamp_s).abs())
+            })
+            .unwrap();
+        assert!((b.timestamp_s - pose.timestamp_s).abs() < 0.03);
+        assert!((b.world_from_camera.translation.vector - t).norm() < 0.05);
+        let forward = pose.world_from_camera.rotation * nalgebra::Vector3::z();
+        assert!(forward.z < 0.0, "the camera looks down: {forward:?}");
+        let body_forward = b.world_from_camera.rotation * nalgebra::Vector3::x();
+        assert!(forward.xy().dot(&body_forward.xy()) > 0.0);
+    }
+    let cylinder = &flight["cylinder"];
+    // Rock 2's cylinder runs from 0.2 m under the ground to above the rock.
+    assert!(cylinder["z_bottom_m"].as_f64().unwrap() < cylinder["z_top_m"].as_f64().unwrap());
 
     for (target, needle) in [
         ("999", "no rock 999"),

@@ -44,6 +44,15 @@ const STEP_M: f64 = 0.01;
 /// Below the narrowest slab, an extent this many times the narrowest one ends the search (the
 /// pedestal or the ground).
 const WIDENING: f64 = 1.5;
+/// Before any narrowing, an extent this many times the slab above it, and wider than
+/// [`WIDENING`] times anything above, is a support's flat top reached under a rock with no neck
+/// (a slab standing on its edge on a wider pedestal): the rock ends at the slab above. No rock
+/// body widens threefold within one [`STEP_M`] away from its top, where its sections start
+/// from nothing.
+const SHOULDER_JUMP: f64 = 3.0;
+/// How far below the scan's top a shoulder may first be taken, metres: the top's own sections
+/// grow from nothing and may triple from one step to the next.
+const SHOULDER_MIN_DEPTH_M: f64 = 0.1;
 
 /// Settings of the scan closing and contact extrapolation ([`close_scan`]). Every field has a
 /// documented default; they are the `[scan]` table of a fragility config file.
@@ -795,16 +804,27 @@ fn find_neck(
     let (z_lo, z_hi) = (f64::from(lo.z), f64::from(hi.z));
     let mut widest = 0.0f64;
     let mut narrowest: Option<(f64, f64, Point2<f64>)> = None;
+    // The last slab with an extent, above the current one.
+    let mut above: Option<(f64, f64, Point2<f64>)> = None;
     let mut z = z_hi - SLAB_M;
     while z >= z_lo {
         // No surface all round at this height (a hole) is no evidence either way.
         if let Some((extent, mean)) = slab_extent(mesh, z) {
             match narrowest {
                 None => {
+                    if let Some(shoulder) = above.filter(|&(_, above_extent, _)| {
+                        z <= z_hi - SHOULDER_MIN_DEPTH_M
+                            && extent > SHOULDER_JUMP * above_extent
+                            && extent > WIDENING * widest
+                    }) {
+                        narrowest = Some(shoulder);
+                        break;
+                    }
                     widest = widest.max(extent);
                     if extent < config.neck_narrowing * widest {
                         narrowest = Some((z, extent, mean));
                     }
+                    above = Some((z, extent, mean));
                 }
                 Some((_, smallest, _)) if extent < smallest => {
                     narrowest = Some((z, extent, mean));
@@ -1517,6 +1537,57 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(error.contains("directions"), "{error}");
+    }
+
+    /// The perimeter of the rectangle |x| ≤ `half_x`, |y| ≤ `half_y`, counter-clockwise, with
+    /// `per_side` points a side: a scan's section has vertices all round, not four corners.
+    fn dense_rect(half_x: f64, half_y: f64, per_side: usize) -> Vec<(f64, f64)> {
+        let corners = [
+            (half_x, -half_y),
+            (half_x, half_y),
+            (-half_x, half_y),
+            (-half_x, -half_y),
+        ];
+        (0..4)
+            .flat_map(|k| {
+                let (a, b) = (corners[k], corners[(k + 1) % 4]);
+                (0..per_side).map(move |i| {
+                    let t = i as f64 / per_side as f64;
+                    (a.0 + t * (b.0 - a.0), a.1 + t * (b.1 - a.1))
+                })
+            })
+            .collect()
+    }
+
+    /// A slab (0.2 × 0.8 m, 0.6 m tall) standing on a pedestal far wider than its base
+    /// (1.2 × 1.2 m, 1 m tall), as one open surface sampled every centimetre: its section never
+    /// narrows, so only the jump onto the pedestal's top says where the rock ends (library-a's
+    /// slab on edge was cut at the ground, 1 m too low, and read α_min 47° for 7°).
+    #[test]
+    fn a_rock_without_a_neck_ends_where_a_wider_support_begins() {
+        let pedestal = dense_rect(0.6, 0.6, 30);
+        let slab = dense_rect(0.1, 0.4, 30);
+        let mut rings: Vec<(&[(f64, f64)], f64)> = (0..=100)
+            .map(|i| (&pedestal[..], f64::from(i) * 0.01))
+            .collect();
+        rings.extend((0..=60).map(|i| (&slab[..], 1.0 + f64::from(i) * 0.01)));
+        let scan = without_bottom_cap(to_mesh(&loft_solid(&rings)));
+        let closed = close_scan(&scan, &ScanConfig::default()).unwrap();
+        assert!(
+            (closed.contact_height_m - 1.0).abs() < 0.02,
+            "contact at {}",
+            closed.contact_height_m
+        );
+        let (_, analysis) = analyze_scan(&scan, &FragilityConfig::default()).unwrap();
+        // Tipping across the 0.2 m thickness about a centre of mass 0.3 m up.
+        let truth_deg = 0.1f64.atan2(0.3).to_degrees();
+        let report = &analysis.report;
+        assert!(
+            (report.alpha_min_deg - truth_deg).abs() < 1.5,
+            "α_min {} against {truth_deg}",
+            report.alpha_min_deg
+        );
+        assert!(report.alpha_min_low_deg <= truth_deg && truth_deg <= report.alpha_min_high_deg);
     }
 
     #[test]
