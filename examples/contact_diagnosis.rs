@@ -120,7 +120,7 @@ fn main() -> Result<()> {
                     .filter(|r| r.iter().take(4).any(|&v| v > 0.0))
                     .count();
                 println!(
-                    "FEATURES {} {:.3} {:.3} {:.3} {:.3} {:.3} {:.3} {:.3} {} {:.3}",
+                    "FEATURES {} {:.3} {:.3} {:.3} {:.3} {:.3} {:.3} {:.3} {} {:.3} {:.3}",
                     label.replace(' ', "_"),
                     truth.alpha_min_deg,
                     a.report.alpha_min_deg,
@@ -137,6 +137,7 @@ fn main() -> Result<()> {
                     closed.filled_area_m2 / (closed.filled_area_m2 + closed.scanned_area_m2),
                     closed.support_plane_found,
                     a.report.rock_height_m,
+                    a.report.com_height_above_contact_m,
                 );
             }
             let map_analysis = map_result.map(|(_, a)| a.report);
