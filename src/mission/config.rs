@@ -151,6 +151,12 @@ impl MissionConfig {
                 self.coverage.threshold
             ));
         }
+        if !(0.0..=3600.0).contains(&self.coverage.min_sweep_deg) {
+            return Err(format!(
+                "`coverage.min_sweep_deg` = {}: must lie in [0, 3600]",
+                self.coverage.min_sweep_deg
+            ));
+        }
         Ok(())
     }
 }

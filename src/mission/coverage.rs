@@ -8,6 +8,13 @@
 //! passes overhead cannot cover it. The top is a ring of cells on the cylinder's lid, facing
 //! up: a flight that stops once the side is seen, before the rings high enough to look down on
 //! the rock, would leave the rock's top (and its centre of mass) unmapped.
+//!
+//! The cells alone end a flight too early: seen from the rings' 1.5 m standoff, a cell counts
+//! from up to 75° off its normal, so half a ring already sees 90% of them. Missions ended
+//! mapping after flying 150–250° of the base ring, and the rock's base, hidden under its
+//! overhang from every direction but its own, went unseen in a third of the directions (the
+//! commonest fragility refusal of the library worlds). So the camera must also have gone all
+//! the way round the axis.
 
 use nalgebra::{Isometry3, Point3, Vector3};
 use scarp_planning::prelude::VerticalCylinder;
@@ -30,6 +37,10 @@ pub struct CoverageConfig {
     pub max_incidence_deg: f64,
     /// Farthest accepted depth along the camera z axis, metres. Default 6.
     pub max_depth_m: f64,
+    /// How far round the cylinder's axis the camera must have flown (net azimuth, either
+    /// way), degrees. Default 345: the first ring all round, less the frames before the map is
+    /// anchored. 0 leaves the cells alone to decide.
+    pub min_sweep_deg: f64,
 }
 
 impl Default for CoverageConfig {
@@ -41,6 +52,7 @@ impl Default for CoverageConfig {
             threshold: 0.9,
             max_incidence_deg: 75.0,
             max_depth_m: 6.0,
+            min_sweep_deg: 345.0,
         }
     }
 }
@@ -54,6 +66,14 @@ pub struct CylinderCoverage {
     /// How many of `cells` are on the side (the rest are on the lid).
     side_cells: usize,
     seen: Vec<bool>,
+    /// The cylinder's axis (xy, world metres), for the sweep.
+    axis_xy: [f64; 2],
+    /// Net azimuth flown round the axis since the first view, radians (counter-clockwise
+    /// positive), and the largest magnitude it reached.
+    sweep_rad: f64,
+    max_sweep_rad: f64,
+    /// Azimuth of the last view round the axis, radians.
+    last_azimuth_rad: Option<f64>,
 }
 
 impl CylinderCoverage {
@@ -82,13 +102,26 @@ impl CylinderCoverage {
             seen: vec![false; cells.len()],
             cells,
             side_cells,
+            axis_xy: [cylinder.center_x_m, cylinder.center_y_m],
+            sweep_rad: 0.0,
+            max_sweep_rad: 0.0,
+            last_azimuth_rad: None,
         }
     }
 
-    /// Marks the cells that a camera at `world_from_camera` sees.
+    /// Marks the cells that a camera at `world_from_camera` sees, and adds its move round the
+    /// axis to the sweep.
     pub fn observe(&mut self, camera: &PinholeCamera, world_from_camera: &Isometry3<f64>) {
         let camera_from_world = world_from_camera.inverse();
         let eye = world_from_camera.translation.vector;
+        let azimuth = (eye.y - self.axis_xy[1]).atan2(eye.x - self.axis_xy[0]);
+        if let Some(last) = self.last_azimuth_rad {
+            // Views come a fraction of a degree apart: the short way round is the way flown.
+            use std::f64::consts::{PI, TAU};
+            self.sweep_rad += (azimuth - last + PI).rem_euclid(TAU) - PI;
+            self.max_sweep_rad = self.max_sweep_rad.max(self.sweep_rad.abs());
+        }
+        self.last_azimuth_rad = Some(azimuth);
         let cos_limit = self.config.max_incidence_deg.to_radians().cos();
         for ((center, normal), seen) in self.cells.iter().zip(self.seen.iter_mut()) {
             if *seen {
@@ -128,10 +161,17 @@ impl CylinderCoverage {
         seen_fraction(self.seen[self.side_cells..].iter())
     }
 
-    /// Whether the side's seen fraction, and the lid's, reached the threshold.
+    /// The largest net azimuth flown round the axis so far, degrees.
+    pub fn sweep_deg(&self) -> f64 {
+        self.max_sweep_rad.to_degrees()
+    }
+
+    /// Whether the side's seen fraction, and the lid's, reached the threshold, and the camera
+    /// went [`CoverageConfig::min_sweep_deg`] round the axis.
     pub fn is_complete(&self) -> bool {
         seen_fraction(self.seen[..self.side_cells].iter()) >= self.config.threshold
             && self.top_fraction() >= self.config.threshold
+            && self.sweep_deg() >= self.config.min_sweep_deg
     }
 }
 
@@ -169,6 +209,53 @@ mod tests {
         // ±75° about the facing azimuth is 150° of 360°, minus what perspective hides.
         assert!(f > 0.25 && f < 0.45, "fraction {f}");
         assert!(!coverage.is_complete());
+    }
+
+    /// Two thirds of a ring see 90% of the side's cells, but the base beyond them is hidden:
+    /// mapping is not complete until the camera has gone round, across the ±180° seam.
+    #[test]
+    fn mapping_needs_a_ring_flown_all_the_way_round() {
+        let camera = PinholeCamera::from_hfov(640, 480, 80.0).unwrap();
+        let mut coverage = CylinderCoverage::new(&cylinder(), CoverageConfig::default());
+        let view = |deg: f64| {
+            let az = deg.to_radians();
+            let eye = Point3::new(2.5 * az.cos(), 2.5 * az.sin(), 3.5);
+            look_at(&eye, &Point3::new(0.0, 0.0, 1.0), &Vector3::z()).unwrap()
+        };
+        // Counter-clockwise from 100° through the seam at 180° to 350° (250°), every 2°.
+        for step in 0..=125 {
+            coverage.observe(&camera, &view(100.0 + 2.0 * f64::from(step)));
+        }
+        assert!(
+            (coverage.sweep_deg() - 250.0).abs() < 1e-6,
+            "{}",
+            coverage.sweep_deg()
+        );
+        assert!(coverage.fraction() >= 0.9, "cells {}", coverage.fraction());
+        assert!(
+            !coverage.is_complete(),
+            "two thirds of a ring are not all round"
+        );
+        for step in 126..=180 {
+            coverage.observe(&camera, &view(100.0 + 2.0 * f64::from(step)));
+        }
+        assert!((coverage.sweep_deg() - 360.0).abs() < 1e-6);
+        assert!(coverage.is_complete());
+        // Turning back (the next ring alternates direction) keeps the largest sweep reached.
+        coverage.observe(&camera, &view(450.0));
+        assert!((coverage.sweep_deg() - 360.0).abs() < 1e-6);
+        // Without the sweep requirement, the cells alone decided after half a ring.
+        let mut cells_only = CylinderCoverage::new(
+            &cylinder(),
+            CoverageConfig {
+                min_sweep_deg: 0.0,
+                ..CoverageConfig::default()
+            },
+        );
+        for step in 0..=125 {
+            cells_only.observe(&camera, &view(100.0 + 2.0 * f64::from(step)));
+        }
+        assert!(cells_only.is_complete());
     }
 
     #[test]

@@ -472,6 +472,7 @@ pub fn finish_target(
     report.frames_mapped = session.frames_mapped;
     report.coverage = session.coverage.fraction();
     report.base_coverage = session.coverage.bottom_fraction();
+    report.sweep_deg = session.coverage.sweep_deg();
     report.keyframes = session.stored.len();
     let complete = session.coverage.is_complete();
     let stored = session.stored;

@@ -47,6 +47,9 @@ pub struct TargetReport {
     pub coverage: f64,
     /// Fraction of the cylinder's bottom band seen (the base).
     pub base_coverage: f64,
+    /// Net azimuth the mapping flight went round the cylinder's axis, degrees.
+    #[serde(default)]
+    pub sweep_deg: f64,
     /// Mesh size.
     pub triangles: usize,
     /// Rock height from the mesh, metres.
