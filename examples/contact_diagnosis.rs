@@ -6,6 +6,7 @@
 //!
 //! ```text
 //! cargo run --release --example contact_diagnosis -- CAMPAIGN_DIR [FRAGILITY_TOML [OUT_DIR]]
+//! cargo run --release --example contact_diagnosis -- --mesh MESH WORLD ROCK_ID LABEL [FRAGILITY_TOML]
 //! ```
 //!
 //! With `OUT_DIR`, each run's `mission.json` is written there with its targets' α_min, interval
@@ -19,8 +20,8 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result};
 use nalgebra::{Isometry3, Point2, Vector3};
 use scarp::fragility::rocking::minimum_support;
-use scarp::fragility::scan::analyze_scan;
-use scarp::fragility::{ContactSpec, FragilityConfig, FragilityReport, analyze};
+use scarp::fragility::scan::{ClosedScan, analyze_scan};
+use scarp::fragility::{ContactSpec, FragilityAnalysis, FragilityConfig, FragilityReport, analyze};
 use scarp::mission::mapping::map_to_world;
 use scarp_datasets::world::World;
 use scarp_export::ply::read_mesh;
@@ -48,12 +49,99 @@ fn world_from_map(target_dir: &Path) -> Result<Isometry3<f64>> {
     map_to_world(&truth, &ba).context("aligning the keyframes to the truth")
 }
 
-fn main() -> Result<()> {
-    let dir = PathBuf::from(std::env::args().nth(1).context("usage: CAMPAIGN_DIR")?);
-    let config: FragilityConfig = match std::env::args().nth(2) {
+/// Prints a scan's contact readings (`READINGS label truth α…`, in
+/// [`ClosedScan::hypotheses`]' order) and its features (`FEATURES label truth α_min
+/// contact-α-low contact-α-high near-fraction neck-offset filled-fraction support-found
+/// rock-height com-height`), the lines `docs/campaigns/tools/interval_calibration.py` reads.
+fn print_readings(
+    label: &str,
+    truth_deg: f64,
+    closed: &ClosedScan,
+    a: &FragilityAnalysis,
+    config: &FragilityConfig,
+) {
+    let label = label.replace(' ', "_");
+    let readings: Vec<String> = closed
+        .hypotheses(1.96 * config.uncertainty.contact_height_sigma_m)
+        .iter()
+        .map(|h| {
+            closed
+                .contact_under(h)
+                .ok()
+                .and_then(|p| a.alpha_min_on_contact(&p))
+                .map_or("nan".into(), |v| format!("{v:.3}"))
+        })
+        .collect();
+    println!("READINGS {} {:.3} {}", label, truth_deg, readings.join(" "));
+    let sectors = closed.profile.radius_m.len();
+    let near = closed
+        .profile
+        .radius_m
+        .iter()
+        .filter(|r| r.iter().take(4).any(|&v| v > 0.0))
+        .count();
+    println!(
+        "FEATURES {} {:.3} {:.3} {:.3} {:.3} {:.3} {:.3} {:.3} {} {:.3} {:.3}",
+        label,
+        truth_deg,
+        a.report.alpha_min_deg,
+        a.report
+            .alpha_interval
+            .contact_alpha_low_deg
+            .unwrap_or(f64::NAN),
+        a.report
+            .alpha_interval
+            .contact_alpha_high_deg
+            .unwrap_or(f64::NAN),
+        near as f64 / sectors as f64,
+        closed.contact_height_m - closed.neck_height_m,
+        closed.filled_area_m2 / (closed.filled_area_m2 + closed.scanned_area_m2),
+        closed.support_plane_found,
+        a.report.rock_height_m,
+        a.report.com_height_above_contact_m,
+    );
+}
+
+/// The fragility configuration in `path` (empty or absent: the defaults).
+fn fragility_config(path: Option<String>) -> Result<FragilityConfig> {
+    Ok(match path {
         Some(path) if !path.is_empty() => toml::from_str(&std::fs::read_to_string(path)?)?,
         Some(_) | None => FragilityConfig::default(),
+    })
+}
+
+/// `--mesh MESH WORLD ROCK_ID LABEL [FRAGILITY_TOML]`: one scan (world frame, z up, such as
+/// `scarp map --poses groundtruth` writes) against rock `ROCK_ID` of `WORLD`; prints its
+/// readings, or `REFUSED label truth reason`.
+fn single_mesh(args: &[String]) -> Result<()> {
+    let [mesh, world, rock_id, label, rest @ ..] = args else {
+        anyhow::bail!("usage: --mesh MESH WORLD ROCK_ID LABEL [FRAGILITY_TOML]");
     };
+    let config = fragility_config(rest.first().cloned())?;
+    let world = World::from_name_or_path(world)?;
+    let rock = world
+        .rock(rock_id.parse()?)
+        .context("no such rock in the world")?;
+    let pedestal = rock.pedestal.as_ref().context("the rock has no pedestal")?;
+    let truth = analyze(&rock.mesh, ContactSpec::Pedestal(pedestal), &config)?;
+    match analyze_scan(&read_mesh(mesh)?, &config) {
+        Ok((closed, a)) => print_readings(label, truth.alpha_min_deg, &closed, &a, &config),
+        Err(e) => println!(
+            "REFUSED {label} {:.3} {}",
+            truth.alpha_min_deg,
+            e.to_string().replace(' ', "_")
+        ),
+    }
+    Ok(())
+}
+
+fn main() -> Result<()> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    if args.first().is_some_and(|a| a == "--mesh") {
+        return single_mesh(&args[1..]);
+    }
+    let dir = PathBuf::from(args.first().context("usage: CAMPAIGN_DIR")?);
+    let config = fragility_config(args.get(1).cloned())?;
     let mut errors: Vec<f64> = Vec::new();
     let mut written: Vec<(PathBuf, serde_json::Value)> = Vec::new();
     let mut refused = 0usize;
@@ -95,50 +183,7 @@ fn main() -> Result<()> {
             );
             let map_result = analyze_scan(&mesh, &config);
             if let Ok((closed, a)) = &map_result {
-                let readings: Vec<String> = closed
-                    .hypotheses(1.96 * config.uncertainty.contact_height_sigma_m)
-                    .iter()
-                    .map(|h| {
-                        closed
-                            .contact_under(h)
-                            .ok()
-                            .and_then(|p| a.alpha_min_on_contact(&p))
-                            .map_or("nan".into(), |v| format!("{v:.3}"))
-                    })
-                    .collect();
-                println!(
-                    "READINGS {} {:.3} {}",
-                    label.replace(' ', "_"),
-                    truth.alpha_min_deg,
-                    readings.join(" ")
-                );
-                let sectors = closed.profile.radius_m.len();
-                let near = closed
-                    .profile
-                    .radius_m
-                    .iter()
-                    .filter(|r| r.iter().take(4).any(|&v| v > 0.0))
-                    .count();
-                println!(
-                    "FEATURES {} {:.3} {:.3} {:.3} {:.3} {:.3} {:.3} {:.3} {} {:.3} {:.3}",
-                    label.replace(' ', "_"),
-                    truth.alpha_min_deg,
-                    a.report.alpha_min_deg,
-                    a.report
-                        .alpha_interval
-                        .contact_alpha_low_deg
-                        .unwrap_or(f64::NAN),
-                    a.report
-                        .alpha_interval
-                        .contact_alpha_high_deg
-                        .unwrap_or(f64::NAN),
-                    near as f64 / sectors as f64,
-                    closed.contact_height_m - closed.neck_height_m,
-                    closed.filled_area_m2 / (closed.filled_area_m2 + closed.scanned_area_m2),
-                    closed.support_plane_found,
-                    a.report.rock_height_m,
-                    a.report.com_height_above_contact_m,
-                );
+                print_readings(&label, truth.alpha_min_deg, closed, a, &config);
             }
             let map_analysis = map_result.map(|(_, a)| a.report);
             update_target(t, &map_analysis, &truth);
@@ -172,7 +217,7 @@ fn main() -> Result<()> {
         written.push((run.clone(), mission));
     }
     let total = errors.len() + refused;
-    if let Some(out) = std::env::args().nth(3) {
+    if let Some(out) = args.get(2) {
         for (run, mission) in &written {
             let rel = run.strip_prefix(&dir)?;
             let target = Path::new(&out).join(rel);
