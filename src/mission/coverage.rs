@@ -10,7 +10,7 @@
 //! the rock, would leave the rock's top (and its centre of mass) unmapped.
 //!
 //! The cells alone end a flight too early: seen from the rings' 1.5 m standoff, a cell counts
-//! from up to 75° off its normal, so half a ring already sees 90% of them. Missions ended
+//! from up to 75° off its normal, so two thirds of a ring see 90% of them. Missions ended
 //! mapping after flying 150–250° of the base ring, and the rock's base, hidden under its
 //! overhang from every direction but its own, went unseen in a third of the directions (the
 //! commonest fragility refusal of the library worlds). So the camera must also have gone all
