@@ -74,12 +74,7 @@ fn print_readings(
         .collect();
     println!("READINGS {} {:.3} {}", label, truth_deg, readings.join(" "));
     let sectors = closed.profile.radius_m.len();
-    let near = closed
-        .profile
-        .radius_m
-        .iter()
-        .filter(|r| r.iter().take(4).any(|&v| v > 0.0))
-        .count();
+    let near = closed.profile.sectors_seen_near(&config.scan);
     println!(
         "FEATURES {} {:.3} {:.3} {:.3} {:.3} {:.3} {:.3} {:.3} {} {:.3} {:.3}",
         label,

@@ -600,6 +600,18 @@ impl ContactHypothesis {
     }
 }
 
+/// How many sectors of `radius_m[sector][slab]` (a [`BasalProfile`]'s) are seen within
+/// [`ScanConfig::profile_near_m`] of the support plane: their lowest measured slab is centred at
+/// most that high.
+fn sectors_seen_near(radius_m: &[Vec<f64>], config: &ScanConfig) -> usize {
+    let near_slabs =
+        ((config.profile_near_m - config.profile_first_m) / PROFILE_SLAB_M).round() as usize + 1;
+    radius_m
+        .iter()
+        .filter(|by_slab| by_slab.iter().take(near_slabs).any(|&r| r > 0.0))
+        .count()
+}
+
 /// The basal profile of a scanned rock: the largest radius from the axis per azimuth sector and
 /// slab above the support plane.
 #[derive(Debug, Clone)]
@@ -666,13 +678,7 @@ impl BasalProfile {
                 azimuth_rad[s][*k] = azimuth;
             }
         }
-        let near_slabs = ((config.profile_near_m - config.profile_first_m) / PROFILE_SLAB_M).round()
-            as usize
-            + 1;
-        let near = radius_m
-            .iter()
-            .filter(|by_slab| by_slab.iter().take(near_slabs).any(|&r| r > 0.0))
-            .count();
+        let near = sectors_seen_near(&radius_m, config);
         if (near as f64) < config.profile_min_near_fraction * sectors as f64 {
             return Err(FragilityError::Degenerate(format!(
                 "the rock's base is seen within {} m of its support in only {near} of \
@@ -691,6 +697,13 @@ impl BasalProfile {
             azimuth_rad,
             slab_top_m,
         })
+    }
+
+    /// How many of the profile's sectors are seen within [`ScanConfig::profile_near_m`] of the
+    /// support plane (`config` must be the one the profile was measured with); [`Self::measure`]
+    /// refuses a profile with too few.
+    pub fn sectors_seen_near(&self, config: &ScanConfig) -> usize {
+        sectors_seen_near(&self.radius_m, config)
     }
 
     /// The contact polygon under `hypothesis`: in each sector, the radius fitted over the

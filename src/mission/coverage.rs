@@ -252,7 +252,7 @@ mod tests {
         // Turning back (the next ring alternates direction) keeps the largest sweep reached.
         coverage.observe(&camera, &view(450.0));
         assert!((coverage.sweep_deg() - 360.0).abs() < 1e-6);
-        // Without the sweep requirement, the cells alone decided after half a ring.
+        // Without the sweep requirement, the cells alone decided after two thirds of a ring.
         let mut cells_only = CylinderCoverage::new(&cylinder(), CoverageConfig::default());
         for step in 0..=125 {
             cells_only.observe(&camera, &view(100.0 + 2.0 * f64::from(step)));

@@ -3,7 +3,8 @@
 
 Reads the `READINGS` and `FEATURES` lines of `examples/contact_diagnosis.rs` (a campaign folder,
 or `--mesh` for one scan), drops repeated scans (the same readings), and for each rule prints
-how often the truth falls inside, the median width, and how many point estimates lie within 2°.
+how often the truth falls inside, the median width, and how many point estimates lie within 2°,
+above +2° and +3°, and below -2°.
 
 A rule is (plane scale s, edge shrink d metres, relative margin m, margin a degrees), as in
 `fragility::scan::analyze_closed_scan`: the readings at the plane moved by s times the ensemble's
@@ -47,7 +48,7 @@ def scaled(group, s):
 
 
 def evaluate(data, s, d, m, a):
-    inside, widths, within, over3, misses = 0, [], 0, 0, []
+    inside, widths, within, over2, over3, under2, misses = 0, [], 0, 0, 0, 0, []
     for label, truth, readings, com_height in data:
         groups = [readings[i:i + 36] for i in range(0, len(readings), 36)]
         first = sorted(scaled(groups[0], s))
@@ -60,13 +61,16 @@ def evaluate(data, s, d, m, a):
         inside += ok
         widths.append(high - low)
         within += abs(point - truth) <= 2.0
+        over2 += point - truth > 2.0
         over3 += point - truth > 3.0
+        under2 += point - truth < -2.0
         if not ok:
             misses.append(f'{label}: truth {truth:.2f} outside [{low:.2f}, {high:.2f}], estimate {point:.2f}')
     widths.sort()
     n = len(data)
     print(f'rule s={s} d={d} m={m} a={a}: {n} scans, truth inside {inside} ({100 * inside / n:.0f}%), '
-          f'median width {widths[n // 2]:.2f}°, |err| <= 2° {within}, over +3° {over3}')
+          f'median width {widths[n // 2]:.2f}°, |err| <= 2° {within}, over +2° {over2}, '
+          f'over +3° {over3}, under -2° {under2}')
     for miss in misses:
         print('   ', miss)
 
