@@ -50,9 +50,12 @@ fn world_from_map(target_dir: &Path) -> Result<Isometry3<f64>> {
 }
 
 /// Prints a scan's contact readings (`READINGS label truth α…`, in
-/// [`ClosedScan::hypotheses`]' order) and its features (`FEATURES label truth α_min
-/// contact-α-low contact-α-high near-fraction neck-offset filled-fraction support-found
-/// rock-height com-height`), the lines `docs/campaigns/tools/interval_calibration.py` reads.
+/// [`ClosedScan::hypotheses`]' order), its interval (`INTERVAL label truth α_min low high
+/// name:below:above…`, one triple per source), the centre-of-mass spread of its unseen patches
+/// (`UNSEEN label patches area-m² below above` at bulge ratios 0.25, 0.5 and 1) and its
+/// features (`FEATURES label truth α_min contact-α-low contact-α-high near-fraction
+/// neck-offset filled-fraction support-found rock-height com-height`), the lines
+/// `docs/campaigns/tools/interval_calibration.py` reads.
 fn print_readings(
     label: &str,
     truth_deg: f64,
@@ -73,6 +76,38 @@ fn print_readings(
         })
         .collect();
     println!("READINGS {} {:.3} {}", label, truth_deg, readings.join(" "));
+    let r = &a.report;
+    let sources: Vec<String> = r
+        .alpha_interval
+        .sources
+        .iter()
+        .map(|s| format!("{}:{:.3}:{:.3}", s.name, s.below_deg, s.above_deg))
+        .collect();
+    println!(
+        "INTERVAL {} {:.3} {:.3} {:.3} {:.3} {}",
+        label,
+        truth_deg,
+        r.alpha_min_deg,
+        r.alpha_min_low_deg,
+        r.alpha_min_high_deg,
+        sources.join(" ")
+    );
+    let spreads: Vec<String> = [0.25, 0.5, 1.0]
+        .iter()
+        .map(|ratio| {
+            let (below, above) =
+                closed.unseen_shape_alpha_spread_deg(a, &a.report.contact_polygon, *ratio);
+            format!("{below:.3} {above:.3}")
+        })
+        .collect();
+    let unseen_m2: f64 = closed.unseen_patches().map(|p| p.area_m2).sum();
+    println!(
+        "UNSEEN {} {} {:.4} {}",
+        label,
+        closed.unseen_patches().count(),
+        unseen_m2,
+        spreads.join(" ")
+    );
     let sectors = closed.profile.radius_m.len();
     let near = closed.profile.sectors_seen_near(&config.scan);
     println!(
@@ -182,16 +217,6 @@ fn main() -> Result<()> {
             }
             let map_analysis = map_result.map(|(_, a)| a.report);
             update_target(t, &map_analysis, &truth);
-            if let Ok(r) = &map_analysis {
-                println!(
-                    "INTERVAL {} {:.3} {:.3} {:.3} {:.3}",
-                    label.replace(' ', "_"),
-                    truth.alpha_min_deg,
-                    r.alpha_min_deg,
-                    r.alpha_min_low_deg,
-                    r.alpha_min_high_deg
-                );
-            }
             let map_alpha = map_analysis.map(|r| r.alpha_min_deg);
             let mut world_mesh = mesh.clone();
             world_mesh.transform(&world_from_map(&target_dir)?);

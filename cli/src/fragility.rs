@@ -134,6 +134,28 @@ pub fn summary(report: &FragilityReport) -> String {
         report.contact_width_m,
         report.purvance_p_rad_s,
         report.rocking_radius_m,
+    ) + &interval_sources(report)
+}
+
+/// The interval's sources, one line each, largest first (empty for the perturbation alone).
+fn interval_sources(report: &FragilityReport) -> String {
+    let mut sources = report.alpha_interval.sources.clone();
+    if sources.len() < 2 {
+        return String::new();
+    }
+    sources.sort_by(|a, b| (b.below_deg + b.above_deg).total_cmp(&(a.below_deg + a.above_deg)));
+    let lines: Vec<String> = sources
+        .iter()
+        .map(|s| {
+            format!(
+                "  {:<20}−{:.2}° +{:.2}°\n",
+                s.name, s.below_deg, s.above_deg
+            )
+        })
+        .collect();
+    format!(
+        "interval sources    95% half-widths, combined in quadrature\n{}",
+        lines.concat()
     )
 }
 
@@ -153,7 +175,7 @@ pub fn run(args: FragilityArgs) -> anyhow::Result<()> {
         tracing::info!(
             contact_m = closed.contact_height_m,
             support_plane = closed.support_plane_found,
-            loops = closed.loops_closed,
+            loops = closed.filled_patches.len(),
             "scan cut above its support and closed"
         );
         Some(closed)

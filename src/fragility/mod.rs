@@ -372,10 +372,35 @@ pub struct AlphaInterval {
     pub contact_alpha_low_deg: Option<f64>,
     /// Largest α_min over the contact readings, degrees.
     pub contact_alpha_high_deg: Option<f64>,
-    /// Fraction of each end added to it (the low end times 1 − f, the high end times 1 + f).
-    pub relative_margin: f64,
-    /// Margin then added to each end, degrees.
-    pub margin_deg: f64,
+    /// The independent sources of the interval, each a 95% half-width below and above α_min;
+    /// the interval is α_min minus the root sum of squares of the `below_deg`, to α_min plus
+    /// that of the `above_deg` (never below 0°).
+    pub sources: Vec<IntervalSource>,
+}
+
+/// One independent source of an α_min interval: how far it may move α_min at 95%.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct IntervalSource {
+    /// What moves α_min: `perturbation` (mesh noise and contact height, the perturbation
+    /// study), `support_plane`, `profile_model`, `unseen_support_edge`, `contact_edge`,
+    /// `unseen_shape` or `margin` ([`scan::analyze_closed_scan`] names each).
+    pub name: String,
+    /// How far it may lower α_min, degrees (≥ 0).
+    pub below_deg: f64,
+    /// How far it may raise α_min, degrees (≥ 0).
+    pub above_deg: f64,
+}
+
+impl IntervalSource {
+    /// A source named `name` with the given half-widths, degrees (negative ones are taken as
+    /// 0: a source that can only raise α_min does not lower it).
+    pub fn new(name: &str, below_deg: f64, above_deg: f64) -> Self {
+        Self {
+            name: name.into(),
+            below_deg: below_deg.max(0.0),
+            above_deg: above_deg.max(0.0),
+        }
+    }
 }
 
 /// A report together with the levelled geometry behind it, for figures.
@@ -409,38 +434,51 @@ impl FragilityAnalysis {
     /// Negative when the centre of mass lies outside it; `None` for a polygon with no area or a
     /// non-finite point.
     pub fn alpha_min_on_contact(&self, polygon: &[[f64; 3]]) -> Option<f64> {
-        let (h, hull) = levelled_polygon(polygon, &self.input_from_levelled.inverse()).ok()?;
-        let support = rocking::minimum_support(&hull, &self.com.xy())?;
-        Some(support.distance_m.atan2(self.com.z - h).to_degrees())
+        self.alpha_min_on_contact_with_com_moved(polygon, &Vector3::zeros())
     }
 
-    /// Widens the α_min interval to span `contact_alphas` (α_min on other readings of the
-    /// contact, degrees; `failed` readings gave none) with the perturbation study's spread on
-    /// each side, then by the fraction `relative_margin` of each end and `margin_deg` beyond.
-    pub fn widen_interval(
+    /// As [`Self::alpha_min_on_contact`], with the centre of mass moved by `com_shift_m`
+    /// (input frame, metres).
+    pub fn alpha_min_on_contact_with_com_moved(
+        &self,
+        polygon: &[[f64; 3]],
+        com_shift_m: &Vector3<f64>,
+    ) -> Option<f64> {
+        let levelled_from_input = self.input_from_levelled.inverse();
+        let (h, hull) = levelled_polygon(polygon, &levelled_from_input).ok()?;
+        let com = self.com + levelled_from_input * com_shift_m;
+        let support = rocking::minimum_support(&hull, &com.xy())?;
+        Some(support.distance_m.atan2(com.z - h).to_degrees())
+    }
+
+    /// Replaces the α_min interval by one of independent sources: the perturbation study's
+    /// (from the current interval) and `sources`, combined in quadrature on each side.
+    /// `contact_alphas` are α_min on the contact readings behind the sources (degrees;
+    /// `failed` readings gave none), reported with the interval.
+    pub fn combine_interval(
         &mut self,
         contact_alphas: &[f64],
         failed: usize,
-        relative_margin: f64,
-        margin_deg: f64,
+        sources: Vec<IntervalSource>,
     ) {
         let r = &mut self.report;
-        let below = r.alpha_min_deg - r.alpha_min_low_deg;
-        let above = r.alpha_min_high_deg - r.alpha_min_deg;
-        let low = contact_alphas.iter().copied().reduce(f64::min);
-        let high = contact_alphas.iter().copied().reduce(f64::max);
-        let spanned_low = low.unwrap_or(r.alpha_min_deg).min(r.alpha_min_deg) - below;
-        let spanned_high = high.unwrap_or(r.alpha_min_deg).max(r.alpha_min_deg) + above;
-        r.alpha_min_low_deg = (spanned_low * (1.0 - relative_margin) - margin_deg).max(0.0);
-        r.alpha_min_high_deg = spanned_high * (1.0 + relative_margin) + margin_deg;
+        let mut all = vec![IntervalSource::new(
+            "perturbation",
+            r.alpha_min_deg - r.alpha_min_low_deg,
+            r.alpha_min_high_deg - r.alpha_min_deg,
+        )];
+        all.extend(sources);
+        let below = all.iter().map(|s| s.below_deg.powi(2)).sum::<f64>().sqrt();
+        let above = all.iter().map(|s| s.above_deg.powi(2)).sum::<f64>().sqrt();
+        r.alpha_min_low_deg = (r.alpha_min_deg - below).max(0.0);
+        r.alpha_min_high_deg = r.alpha_min_deg + above;
         r.alpha_interval = AlphaInterval {
             source: "scan_contact".into(),
             contact_hypotheses: contact_alphas.len() + failed,
             contact_hypotheses_failed: failed,
-            contact_alpha_low_deg: low,
-            contact_alpha_high_deg: high,
-            relative_margin,
-            margin_deg,
+            contact_alpha_low_deg: contact_alphas.iter().copied().reduce(f64::min),
+            contact_alpha_high_deg: contact_alphas.iter().copied().reduce(f64::max),
+            sources: all,
         };
     }
 }
@@ -748,8 +786,11 @@ pub fn analyze_detailed(
             contact_hypotheses_failed: 0,
             contact_alpha_low_deg: None,
             contact_alpha_high_deg: None,
-            relative_margin: 0.0,
-            margin_deg: 0.0,
+            sources: vec![IntervalSource::new(
+                "perturbation",
+                alpha - perturbed_low,
+                perturbed_high - alpha,
+            )],
         },
         uncertainty,
         up: Vector3::from(config.up).normalize().into(),
