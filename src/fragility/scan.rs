@@ -413,10 +413,10 @@ fn support_plane_height(
 }
 
 /// The edge of the support's top seen around a rock: per azimuth sector around the basal
-/// profile's axis, the largest radius of the scan's surface in the highest slab seen from 1.5
-/// to 15 cm below the support plane, up to `support_radius_m`. Seen from the side,
-/// this is the pedestal's edge where the rock's overhang hides the pedestal's top. The contact
-/// cannot reach beyond it.
+/// profile's axis, the largest radius of the scan's surface in the slabs seen from 1.5 to 15 cm
+/// below the support plane, up to `support_radius_m`, the narrowest of the highest few
+/// ([`edge_of_sector`]). Seen from the side, this is the pedestal's edge where the rock's
+/// overhang hides the pedestal's top. The contact cannot reach beyond it.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SupportOutline {
     /// The axis the sectors are taken around (xy, world metres).
@@ -450,8 +450,9 @@ impl SupportOutline {
     ) -> Option<Self> {
         let sectors = config.profile_sectors;
         let slabs = ((SUPPORT_BAND_M.1 - SUPPORT_BAND_M.0) / PROFILE_SLAB_M).round() as usize;
-        // `highest[sector]`: (slab index from the top, largest radius in it, its azimuth).
-        let mut highest: Vec<Option<(usize, f64, f64)>> = vec![None; sectors];
+        // `widest[sector][slab]`: the largest radius in the slab (slab 0 the highest) and its
+        // azimuth.
+        let mut widest: Vec<Vec<Option<(f64, f64)>>> = vec![vec![None; slabs]; sectors];
         for p in &mesh.positions {
             let depth = plane_z - f64::from(p.z) - SUPPORT_BAND_M.0;
             let xy = Point2::new(f64::from(p.x), f64::from(p.y));
@@ -464,19 +465,23 @@ impl SupportOutline {
                 continue;
             }
             let azimuth = azimuth_of(&xy, axis_xy);
-            let entry = &mut highest[sector_of_azimuth(azimuth, sectors)];
-            *entry = match *entry {
-                Some((j, best, a)) if j < k || (j == k && best >= r) => Some((j, best, a)),
-                _ => Some((k, r, azimuth)),
-            };
+            let entry = &mut widest[sector_of_azimuth(azimuth, sectors)][k];
+            if entry.is_none_or(|(best, _)| r > best) {
+                *entry = Some((r, azimuth));
+            }
         }
+        // `highest[sector]`: the edge's radius and the azimuth of the point at it.
+        let highest: Vec<Option<(f64, f64)>> = widest
+            .iter()
+            .map(|by_slab| edge_of_sector(by_slab))
+            .collect();
         let outline = Self {
             axis_xy: *axis_xy,
-            radius_m: highest.iter().map(|h| h.map(|(_, r, _)| r)).collect(),
+            radius_m: highest.iter().map(|h| h.map(|(r, _)| r)).collect(),
             azimuth_rad: highest
                 .iter()
                 .enumerate()
-                .map(|(s, h)| h.map_or_else(|| sector_middle_rad(s, sectors), |(_, _, a)| a))
+                .map(|(s, h)| h.map_or_else(|| sector_middle_rad(s, sectors), |(_, a)| a))
                 .collect(),
             open_radius_m: config.support_radius_m,
         };
@@ -533,6 +538,32 @@ impl SupportOutline {
 
 /// A support outline seen in fewer sectors than this is not interpolated: it bounds nothing.
 const MIN_OUTLINE_SECTORS: usize = 3;
+
+/// Seen slabs of a sector (the highest first) that the support's edge is read from.
+const OUTLINE_SLABS: usize = 5;
+
+/// The support's edge in one sector, from `by_slab[k]`, the largest radius seen in the k-th
+/// slab below [`SUPPORT_BAND_M`]'s top and its azimuth: the narrowest of the highest
+/// [`OUTLINE_SLABS`] slabs seen, with its azimuth; `None` when fewer than three slabs are seen.
+///
+/// Why the narrowest: the support's side is a wall that goes down from its top, and a pedestal
+/// is a column that widens downwards, so its top is its narrowest. A wider slab is something
+/// else: on library-b's tilted block, the rock's own side hangs 1.5–3.5 cm below the plane
+/// beyond the pedestal's edge, and read from the highest slab the edge was 0.70–0.77 m where
+/// the pedestal's is 0.22 m. A sector seen in fewer slabs is not taken as a wall.
+fn edge_of_sector(by_slab: &[Option<(f64, f64)>]) -> Option<(f64, f64)> {
+    let seen: Vec<(f64, f64)> = by_slab
+        .iter()
+        .flatten()
+        .take(OUTLINE_SLABS)
+        .copied()
+        .collect();
+    if seen.len() < 3 {
+        return None;
+    }
+    seen.into_iter()
+        .reduce(|a, b| if b.0 < a.0 { b } else { a })
+}
 
 /// The azimuth of the middle of sector `sector` of `sectors`, radians.
 fn sector_middle_rad(sector: usize, sectors: usize) -> f64 {
@@ -1915,12 +1946,70 @@ mod tests {
         }
     }
 
+    /// A 72-sided column from `z0` to `z1` with a ring every centimetre, as a scan samples a
+    /// pedestal's side, `radius(z)` metres across at height z.
+    fn column(radius: &dyn Fn(f64) -> f64, z0: f64, z1: f64) -> TriangleMesh {
+        let heights: Vec<f64> = (0..)
+            .map(|i| z0 + 0.01 * f64::from(i))
+            .take_while(|z| *z < z1 + 1e-9)
+            .collect();
+        let rings: Vec<Vec<(f64, f64)>> = heights
+            .iter()
+            .map(|&z| regular_ring(72, radius(z), 0.0))
+            .collect();
+        let lofted: Vec<(&[(f64, f64)], f64)> = rings
+            .iter()
+            .zip(&heights)
+            .map(|(r, z)| (r.as_slice(), *z))
+            .collect();
+        to_mesh(&loft_solid(&lofted))
+    }
+
+    #[test]
+    fn the_support_edge_is_its_top_not_a_rock_side_hanging_beside_it() {
+        // A pedestal 0.3 m across at its top (0.8 m), widening 0.5 m per metre down, and a
+        // rock's side hanging 1–3 cm below the plane, 0.6 m out, over azimuths 0–40°.
+        let mut scan = column(&|z| 0.3 + 0.5 * (0.8 - z), 0.5, 0.8);
+        let base = scan.positions.len() as u32;
+        for k in 0..=8 {
+            let t = (5.0 * f64::from(k)).to_radians();
+            for z in [0.77f32, 0.78, 0.79] {
+                scan.positions.push(Point3::new(
+                    (0.6 * t.cos()) as f32,
+                    (0.6 * t.sin()) as f32,
+                    z,
+                ));
+            }
+        }
+        for k in 0..8u32 {
+            for j in 0..2u32 {
+                let (a, b) = (base + 3 * k + j, base + 3 * (k + 1) + j);
+                scan.faces.push([a, b, b + 1]);
+                scan.faces.push([a, b + 1, a + 1]);
+            }
+        }
+        let outline =
+            SupportOutline::measure(&scan, &Point2::origin(), 0.8, &ScanConfig::default()).unwrap();
+        assert_eq!(outline.seen_sectors(), 36);
+        // Its highest slab is centred 2 cm down, where the pedestal is 0.31 m across; where
+        // the rock's side fills the two highest slabs, the narrowest of the five is the
+        // pedestal's 4 cm down, 0.32 m (the rock's 0.6 m, read before, is gone).
+        for (sector, r) in outline.radius_m.iter().enumerate() {
+            let expected = if sector < 4 { 0.32 } else { 0.31 };
+            assert!(
+                (r.unwrap() - expected).abs() < 0.002,
+                "{sector}: {:?}",
+                outline.radius_m
+            );
+        }
+    }
+
     #[test]
     fn the_support_edge_is_read_below_an_overhang_that_hides_its_top() {
         // A pedestal 0.3 m in radius whose top 10 cm (under the rock's overhang) no camera saw:
         // its side is seen only from 0.7 m down, and its top is at 0.8 m.
         let ring = regular_ring(72, 0.3, 0.0);
-        let pedestal = to_mesh(&loft_solid(&[(&ring, 0.0), (&ring, 0.7)]));
+        let pedestal = column(&|_| 0.3, 0.0, 0.7);
         let outline =
             SupportOutline::measure(&pedestal, &Point2::origin(), 0.8, &ScanConfig::default())
                 .expect("the side below the hidden band bounds the contact");
