@@ -10,9 +10,9 @@ with the misses.
 Rules:
 - `--quadrature k,margin,ratio`: `fragility::scan::analyze_closed_scan`'s rule (session 22) with
   its sources scaled by k, `margin` degrees for `interval_margin_deg` and the unseen patches'
-  bulge ratio (0.25, 0.5 or 1, the ratios the `UNSEEN` lines hold); the shipped rule is
-  1,1,0.5 less the perturbation study, which the readings do not hold (a few hundredths of a
-  degree);
+  bulge ratio (0.25, 0.5 or 1, the ratios the `UNSEEN` lines hold; 0 leaves the source out);
+  the shipped rule is 1,1,0.5 less the perturbation study, which the readings do not hold (a
+  few hundredths of a degree);
 - `--envelope s,d,m,a`: the rule shipped before session 22: the envelope of the readings at the
   plane moved by s times the ensemble's offset, each also with its contact shrunk by d metres,
   widened by the fraction m and by a degrees.
@@ -81,8 +81,9 @@ def quadrature(scan, k, margin, ratio):
     ]
     if len(groups) > 1:
         sources.append((0.0, max(0.0, median(x for x in groups[1] if x == x) - point)))
-    i = RATIOS.index(ratio)
-    sources.append((scan['unseen'][2 * i], scan['unseen'][2 * i + 1]))
+    if ratio > 0:
+        i = RATIOS.index(ratio)
+        sources.append((scan['unseen'][2 * i], scan['unseen'][2 * i + 1]))
     below = k * math.sqrt(sum(b * b for b, _ in sources))
     above = k * math.sqrt(sum(a * a for _, a in sources))
     return point, max(point - below, 0.0), point + above
