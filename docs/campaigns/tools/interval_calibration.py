@@ -11,7 +11,7 @@ Rules:
 - `--quadrature k,margin,ratio`: `fragility::scan::analyze_closed_scan`'s rule (session 22) with
   its sources scaled by k, `margin` degrees for `interval_margin_deg` and the unseen patches'
   bulge ratio (0.25, 0.5 or 1, the ratios the `UNSEEN` lines hold; 0 leaves the source out);
-  the shipped rule is 1,1,0.5 less the perturbation study, which the readings do not hold (a
+  the shipped rule is 1,1.5,0.5 less the perturbation study, which the readings do not hold (a
   few hundredths of a degree);
 - `--envelope s,d,m,a`: the rule shipped before session 22: the envelope of the readings at the
   plane moved by s times the ensemble's offset, each also with its contact shrunk by d metres,
