@@ -155,57 +155,7 @@ fn single_mesh(args: &[String]) -> Result<()> {
     let pedestal = rock.pedestal.as_ref().context("the rock has no pedestal")?;
     let truth = analyze(&rock.mesh, ContactSpec::Pedestal(pedestal), &config)?;
     match analyze_scan(&read_mesh(mesh)?, &config) {
-        Ok((closed, a)) => {
-            print_readings(label, truth.alpha_min_deg, &closed, &a, &config);
-            if std::env::var("DBG").is_ok() {
-                let ax = closed.profile.axis_xy;
-                let rad = |p: &[f64; 3]| {
-                    let d = Point2::new(p[0], p[1]) - ax;
-                    (d.y.atan2(d.x).to_degrees(), d.norm())
-                };
-                eprintln!(
-                    "plane {:.4} truth contact h {:.4} com {:?} truth com {:?} min az {:.0} truth az {:.0}",
-                    closed.contact_height_m,
-                    truth.contact_height_m,
-                    a.report.center_of_mass,
-                    truth.center_of_mass,
-                    a.report.alpha_min_azimuth_deg,
-                    truth.alpha_min_azimuth_deg
-                );
-                if let Some(o) = &closed.support_outline {
-                    for (r, az) in o.radius_m.iter().zip(&o.azimuth_rad) {
-                        eprint!(
-                            "{:.0}:{} ",
-                            az.to_degrees(),
-                            r.map_or("-".into(), |r| format!("{r:.3}"))
-                        );
-                    }
-                    eprintln!();
-                }
-                eprintln!(
-                    "est: {:?}",
-                    a.report
-                        .contact_polygon
-                        .iter()
-                        .map(|p| {
-                            let (z, r) = rad(p);
-                            format!("{z:.0}:{r:.3}")
-                        })
-                        .collect::<Vec<_>>()
-                );
-                eprintln!(
-                    "tru: {:?}",
-                    truth
-                        .contact_polygon
-                        .iter()
-                        .map(|p| {
-                            let (z, r) = rad(p);
-                            format!("{z:.0}:{r:.3}")
-                        })
-                        .collect::<Vec<_>>()
-                );
-            }
-        }
+        Ok((closed, a)) => print_readings(label, truth.alpha_min_deg, &closed, &a, &config),
         Err(e) => println!(
             "REFUSED {label} {:.3} {}",
             truth.alpha_min_deg,
