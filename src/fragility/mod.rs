@@ -452,7 +452,7 @@ impl FragilityAnalysis {
     }
 
     /// Replaces the α_min interval by one of independent sources: the perturbation study's
-    /// (from the current interval) and `sources`, combined in quadrature on each side.
+    /// (as [`analyze_detailed`] recorded it) and `sources`, combined in quadrature on each side.
     /// `contact_alphas` are α_min on the contact readings behind the sources (degrees;
     /// `failed` readings gave none), reported with the interval.
     pub fn combine_interval(
@@ -462,11 +462,8 @@ impl FragilityAnalysis {
         sources: Vec<IntervalSource>,
     ) {
         let r = &mut self.report;
-        let mut all = vec![IntervalSource::new(
-            "perturbation",
-            r.alpha_min_deg - r.alpha_min_low_deg,
-            r.alpha_min_high_deg - r.alpha_min_deg,
-        )];
+        let mut all = std::mem::take(&mut r.alpha_interval.sources);
+        all.retain(|s| s.name == "perturbation");
         all.extend(sources);
         let below = all.iter().map(|s| s.below_deg.powi(2)).sum::<f64>().sqrt();
         let above = all.iter().map(|s| s.above_deg.powi(2)).sum::<f64>().sqrt();

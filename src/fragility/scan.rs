@@ -279,7 +279,7 @@ pub struct ClosedScan {
 }
 
 /// A patch [`close_scan`] laid over a boundary loop of the scan: a fan of triangles around the
-/// loop's centroid, world frame, metres. The rock's true surface there was seen by no camera.
+/// loop's centroid, in the scan's frame (z up), metres. The rock's true surface there was seen by no camera.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FilledPatch {
     /// Area of the fan, m².
@@ -843,15 +843,10 @@ fn shrunk_contact_alpha_deg(alpha_deg: f64, com_height_m: f64, shrink_m: f64) ->
     distance_m.max(0.0).atan2(com_height_m).to_degrees()
 }
 
-/// The volume a closed mesh encloses, m³: positive when its faces wind outward.
-fn signed_volume_m3(mesh: &TriangleMesh) -> f64 {
-    mesh.faces
-        .iter()
-        .map(|f| {
-            let [a, b, c] = f.map(|v| mesh.positions[v as usize].cast::<f64>().coords);
-            a.dot(&b.cross(&c)) / 6.0
-        })
-        .sum()
+/// +1 when a closed mesh's faces wind outward (it encloses a positive volume), else −1.
+fn outward_sign(mesh: &TriangleMesh) -> f64 {
+    mesh.volume_properties()
+        .map_or(1.0, |v| v.volume_m3.signum())
 }
 
 /// Least-squares line y = a + b·x through `points` (x, y); `None` when the x are all equal.
@@ -1114,10 +1109,11 @@ fn fan(mesh: &mut TriangleMesh, chain: &[u32]) -> Option<FilledPatch> {
     for k in 0..chain.len() {
         let face = [chain[k], chain[(k + 1) % chain.len()], c];
         let [a, b, o] = face.map(|v| mesh.positions[v as usize].cast::<f64>());
-        let twice_area = (b - a).cross(&(o - a));
-        patch.area_m2 += 0.5 * twice_area.norm();
-        patch.area_vector_m2 += 0.5 * twice_area;
-        moment += 0.5 * twice_area.norm() * (a.coords + b.coords + o.coords) / 3.0;
+        let area_vector = 0.5 * (b - a).cross(&(o - a));
+        let area = area_vector.norm();
+        patch.area_m2 += area;
+        patch.area_vector_m2 += area_vector;
+        moment += area * (a.coords + b.coords + o.coords) / 3.0;
         patch.boundary_top_m = patch.boundary_top_m.max(a.z);
         mesh.faces.push(face);
     }
@@ -1257,7 +1253,7 @@ impl ClosedScan {
         };
         // The area vectors follow the mesh's winding: outward when it encloses a positive
         // volume.
-        let outward = signed_volume_m3(&self.mesh).signum();
+        let outward = outward_sign(&self.mesh);
         let volume_m3 = analysis.report.volume_m3;
         let com = Point3::from(analysis.report.center_of_mass);
         let (mut below2, mut above2) = (0.0, 0.0);
@@ -1480,24 +1476,23 @@ fn reading_sources(
     alphas: &[Option<f64>],
     point_deg: f64,
 ) -> Vec<IntervalSource> {
-    let alpha = |i: usize| alphas[i];
     let (mut plane_below, mut plane_above, mut at_plane) = (Vec::new(), Vec::new(), Vec::new());
     // The ensemble varies the plane offset innermost: each model and fit is a run of three
     // readings, below, at and above the measured plane.
-    for run in (0..hypotheses.len()).collect::<Vec<_>>().chunks_exact(3) {
-        let [low, mid, high] = [run[0], run[1], run[2]];
-        if hypotheses[mid].gaps != OutlineGaps::Interpolated {
+    for (run, run_alphas) in hypotheses.chunks_exact(3).zip(alphas.chunks_exact(3)) {
+        if run[1].gaps != OutlineGaps::Interpolated {
             continue;
         }
         debug_assert!(
-            hypotheses[low].plane_offset_m < 0.0
-                && hypotheses[mid].plane_offset_m == 0.0
-                && hypotheses[high].plane_offset_m > 0.0
-                || hypotheses[low].plane_offset_m == hypotheses[high].plane_offset_m
+            run[0].plane_offset_m < 0.0
+                && run[1].plane_offset_m == 0.0
+                && run[2].plane_offset_m > 0.0
+                || run[0].plane_offset_m == run[2].plane_offset_m
         );
-        let Some(m) = alpha(mid) else { continue };
+        let [low, mid, high] = [run_alphas[0], run_alphas[1], run_alphas[2]];
+        let Some(m) = mid else { continue };
         at_plane.push(m);
-        if let (Some(l), Some(h)) = (alpha(low), alpha(high)) {
+        if let (Some(l), Some(h)) = (low, high) {
             plane_below.push(m - l.min(h).min(m));
             plane_above.push(l.max(h).max(m) - m);
         }
@@ -1738,8 +1733,7 @@ mod tests {
             "{patches:?}"
         );
         // The patch faces the hole's outside (+x), along the scan's outward winding.
-        let normal =
-            patches[0].area_vector_m2.normalize() * signed_volume_m3(&closed.mesh).signum();
+        let normal = patches[0].area_vector_m2.normalize() * outward_sign(&closed.mesh);
         assert!(normal.x > 0.9, "{normal}");
         let (below, above) = unseen(&analysis);
         assert!(below + above > 0.05, "{below} {above}");
