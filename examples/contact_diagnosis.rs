@@ -65,7 +65,7 @@ fn print_readings(
 ) {
     let label = label.replace(' ', "_");
     let readings: Vec<String> = closed
-        .hypotheses(1.96 * config.uncertainty.contact_height_sigma_m)
+        .hypotheses(config)
         .iter()
         .map(|h| {
             closed
@@ -126,7 +126,7 @@ fn print_readings(
         near as f64 / sectors as f64,
         closed.contact_height_m - closed.neck_height_m,
         closed.filled_area_m2 / (closed.filled_area_m2 + closed.scanned_area_m2),
-        closed.support_plane_found,
+        closed.support_plane.is_some(),
         a.report.rock_height_m,
         a.report.com_height_above_contact_m,
     );
@@ -155,7 +155,10 @@ fn single_mesh(args: &[String]) -> Result<()> {
     let pedestal = rock.pedestal.as_ref().context("the rock has no pedestal")?;
     let truth = analyze(&rock.mesh, ContactSpec::Pedestal(pedestal), &config)?;
     match analyze_scan(&read_mesh(mesh)?, &config) {
-        Ok((closed, a)) => print_readings(label, truth.alpha_min_deg, &closed, &a, &config),
+        Ok((closed, a)) => {
+            print_readings(label, truth.alpha_min_deg, &closed, &a, &config);
+            print_plane(label, &read_mesh(mesh)?, &closed, truth.contact_height_m);
+        }
         Err(e) => println!(
             "REFUSED {label} {:.3} {}",
             truth.alpha_min_deg,
@@ -284,6 +287,47 @@ fn print_row(label: &str, truth: &FragilityReport, a_map: f64, scan: &FragilityR
         alpha_deg(&scan.contact_polygon, &truth.center_of_mass),
         alpha_deg(&truth.contact_polygon, &scan.center_of_mass),
     );
+}
+
+/// `PLANE label found dh_mm` then, per radius 0.5 and 1.0 m around the profile's axis, the
+/// upward faces' area (m²) within ±3 cm of the support plane and their area-weighted mean and
+/// standard deviation of height about it, mm.
+fn print_plane(label: &str, mesh: &scarp_slam::TriangleMesh, closed: &ClosedScan, truth_z: f64) {
+    let plane = closed.contact_height_m;
+    let axis = closed.profile.axis_xy;
+    let mut out = format!(
+        "PLANE {} {} {:+.1}",
+        label.replace(' ', "_"),
+        closed.support_plane.is_some(),
+        (plane - truth_z) * 1e3
+    );
+    for radius in [0.5, 1.0] {
+        let (mut w, mut s, mut s2) = (0.0, 0.0, 0.0);
+        for f in &mesh.faces {
+            let [a, b, c] = f.map(|v| mesh.positions[v as usize].cast::<f64>());
+            let n = (b - a).cross(&(c - a));
+            let area2 = n.norm();
+            let centre = (a.coords + b.coords + c.coords) / 3.0;
+            let h = centre.z - plane;
+            if area2 > 0.0
+                && n.z > 0.95 * area2
+                && h.abs() <= 0.03
+                && (centre.xy() - axis.coords).norm() <= radius
+            {
+                w += 0.5 * area2;
+                s += 0.5 * area2 * h;
+                s2 += 0.5 * area2 * h * h;
+            }
+        }
+        let mean = s / w;
+        out += &format!(
+            " {:.4} {:+.1} {:.1}",
+            w,
+            mean * 1e3,
+            (s2 / w - mean * mean).max(0.0).sqrt() * 1e3
+        );
+    }
+    println!("{out}");
 }
 
 fn glob_runs(dir: &Path) -> Result<Vec<PathBuf>> {

@@ -174,7 +174,8 @@ pub fn run(args: FragilityArgs) -> anyhow::Result<()> {
             .with_context(|| format!("closing the scan {}", args.mesh.display()))?;
         tracing::info!(
             contact_m = closed.contact_height_m,
-            support_plane = closed.support_plane_found,
+            support_plane_m = closed.support_plane.map(|p| p.height_m),
+            support_roughness_m = closed.support_plane.map(|p| p.roughness_m),
             loops = closed.filled_patches.len(),
             "scan cut above its support and closed"
         );

@@ -140,6 +140,11 @@ pub struct ScanConfig {
     /// α_min interval spans the centre of mass moved by each patch's paraboloid cap of that
     /// height, out and in. Default 0.5, a round rock's cap.
     pub unseen_bulge_ratio: f64,
+    /// The mesh's own 1σ error in the support plane's height, metres, beside the support's
+    /// measured roughness ([`SupportPlane::roughness_m`]): the TSDF's bias where the rock meets
+    /// its support. The interval's `support_plane` source moves the plane by ±1.96 σ of the
+    /// two in quadrature. Default 0.002, a fifth of a 1 cm voxel.
+    pub support_mesh_sigma_m: f64,
 }
 
 impl Default for ScanConfig {
@@ -163,6 +168,7 @@ impl Default for ScanConfig {
             max_unseen_support_effect_deg: 5.0,
             min_contact_to_edge_m: 0.05,
             unseen_bulge_ratio: 0.5,
+            support_mesh_sigma_m: 0.002,
         }
     }
 }
@@ -191,6 +197,7 @@ impl ScanConfig {
             ("scan.contact_edge_m", self.contact_edge_m),
             ("scan.min_contact_to_edge_m", self.min_contact_to_edge_m),
             ("scan.unseen_bulge_ratio", self.unseen_bulge_ratio),
+            ("scan.support_mesh_sigma_m", self.support_mesh_sigma_m),
             (
                 "scan.max_unseen_support_effect_deg",
                 self.max_unseen_support_effect_deg,
@@ -252,9 +259,9 @@ pub struct ClosedScan {
     /// Height of the contact (the support plane, or the neck when no plane was found), metres
     /// along z.
     pub contact_height_m: f64,
-    /// Whether the support's top was found as a plane ([`ClosedScan::contact_height_m`] is then
-    /// its height, else the narrowest slab's).
-    pub support_plane_found: bool,
+    /// The support's top, when it was found as a plane ([`ClosedScan::contact_height_m`] is
+    /// then its height, else the narrowest slab's).
+    pub support_plane: Option<SupportPlane>,
     /// The extrapolated contact polygon, counter-clockwise, world frame, metres:
     /// [`ContactHypothesis::POINT_ESTIMATE`] (over [`ScanConfig::profile_fit_slabs`]) at
     /// [`ClosedScan::contact_height_m`], clipped by [`ClosedScan::support_outline`]; after
@@ -367,18 +374,43 @@ fn sector_of_azimuth(azimuth_rad: f64, sectors: usize) -> usize {
     ((a / std::f64::consts::TAU * sectors as f64) as usize).min(sectors - 1)
 }
 
-/// The height of the support's top (pedestal or ground) under a scanned rock: the highest level
-/// from `support_search_above_m` above `neck_z` to `support_search_below_m` below it where
-/// upward-facing faces fill at least
-/// `support_min_sectors` of [`SECTORS`] sectors around `axis_xy`; the area-weighted mean height
-/// of the faces within a bin of it. `None` when no level qualifies (the support is not seen
-/// all round).
-fn support_plane_height(
+/// The support's top (pedestal or ground) under a scanned rock, as [`close_scan`] measured it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SupportPlane {
+    /// Height of the support's top, metres along z: the contact's height.
+    pub height_m: f64,
+    /// The support's measured roughness, metres: the area-weighted standard deviation of the
+    /// heights of its upward faces within [`SUPPORT_ROUGHNESS_BAND_M`] of
+    /// [`SupportPlane::height_m`] and `support_radius_m` of the rock's axis. A rough or sloping
+    /// support, or a blurred scan of it, leaves the rock's resting height less sure.
+    pub roughness_m: f64,
+}
+
+/// Upward faces within this of the support plane's height, metres, measure its roughness: wide
+/// enough to hold a rough top's asperities, narrow enough to leave the ground under a pedestal
+/// and the rock's own faces out.
+pub const SUPPORT_ROUGHNESS_BAND_M: f64 = 0.03;
+
+impl SupportPlane {
+    /// 1σ of the contact's height on this support, metres: its roughness and the mesh's own
+    /// error `mesh_sigma_m` in quadrature.
+    pub fn height_sigma_m(&self, mesh_sigma_m: f64) -> f64 {
+        self.roughness_m.hypot(mesh_sigma_m)
+    }
+}
+
+/// The support's top (pedestal or ground) under a scanned rock: the highest level from
+/// `support_search_above_m` above `neck_z` to `support_search_below_m` below it where
+/// upward-facing faces fill at least `support_min_sectors` of [`SECTORS`] sectors around
+/// `axis_xy`; its height is the area-weighted mean height of the faces within a bin of it, and
+/// its roughness their spread within [`SUPPORT_ROUGHNESS_BAND_M`]. `None` when no level
+/// qualifies (the support is not seen all round).
+fn support_plane(
     mesh: &TriangleMesh,
     axis_xy: &Point2<f64>,
     neck_z: f64,
     config: &ScanConfig,
-) -> Option<f64> {
+) -> Option<SupportPlane> {
     // (height, area, sector) of each upward face near the neck.
     let faces: Vec<(f64, f64, usize)> = mesh
         .faces
@@ -391,8 +423,8 @@ fn support_plane_height(
             let xy = centre.xy();
             (area2 > 0.0
                 && n.z > UP_COS * area2
-                && centre.z <= neck_z + config.support_search_above_m
-                && centre.z >= neck_z - config.support_search_below_m
+                && centre.z <= neck_z + config.support_search_above_m + SUPPORT_ROUGHNESS_BAND_M
+                && centre.z >= neck_z - config.support_search_below_m - SUPPORT_ROUGHNESS_BAND_M
                 && (xy - axis_xy).norm() <= config.support_radius_m)
                 .then(|| (centre.z, 0.5 * area2, sector_of(&xy, axis_xy, SECTORS)))
         })
@@ -407,11 +439,27 @@ fn support_plane_height(
             .map(|&(_, _, sector)| sector);
         (sectors_filled(at_level) >= config.support_min_sectors).then_some(z)
     })?;
-    let (sum, area) = faces
-        .iter()
-        .filter(|(fz, _, _)| (fz - level).abs() <= SUPPORT_BIN_M)
-        .fold((0.0, 0.0), |(s, w), &(fz, a, _)| (s + fz * a, w + a));
-    (area > 0.0).then(|| sum / area)
+    // Area-weighted (Σ a, Σ a·dz, Σ a·dz²) of the faces within `band` of `z`, dz = height − z:
+    // about `z`, so that a large height cancels no significant digits.
+    let moments = |z: f64, band: f64| {
+        faces
+            .iter()
+            .filter(|(fz, _, _)| (fz - z).abs() <= band)
+            .fold((0.0, 0.0, 0.0), |(w, s, s2), &(fz, a, _)| {
+                (w + a, s + a * (fz - z), s2 + a * (fz - z) * (fz - z))
+            })
+    };
+    let (area, offset, _) = moments(level, SUPPORT_BIN_M);
+    if area <= 0.0 {
+        return None;
+    }
+    let height_m = level + offset / area;
+    let (w, s, s2) = moments(height_m, SUPPORT_ROUGHNESS_BAND_M);
+    let mean = s / w;
+    Some(SupportPlane {
+        height_m,
+        roughness_m: (s2 / w - mean * mean).max(0.0).sqrt(),
+    })
 }
 
 /// The edge of the support's top seen around a rock: per azimuth sector around the basal
@@ -1132,7 +1180,8 @@ fn fan(mesh: &mut TriangleMesh, chain: &[u32]) -> Option<FilledPatch> {
 pub fn close_scan(mesh: &TriangleMesh, config: &ScanConfig) -> Result<ClosedScan, FragilityError> {
     config.validate()?;
     let (neck_z, axis_xy) = find_neck(mesh, config)?;
-    let plane_z = support_plane_height(mesh, &axis_xy, neck_z, config);
+    let support_plane = support_plane(mesh, &axis_xy, neck_z, config);
+    let plane_z = support_plane.map(|p| p.height_m);
     let contact_height_m = plane_z.unwrap_or(neck_z);
     let cut_z = plane_z.map_or(neck_z, |z| z + config.cut_above_support_m);
     let weld = welded_vertices(mesh);
@@ -1213,7 +1262,7 @@ pub fn close_scan(mesh: &TriangleMesh, config: &ScanConfig) -> Result<ClosedScan
     Ok(ClosedScan {
         mesh: rock,
         contact_height_m,
-        support_plane_found: plane_z.is_some(),
+        support_plane,
         contact_polygon,
         profile,
         support_outline,
@@ -1284,9 +1333,21 @@ impl ClosedScan {
         (below2.sqrt(), above2.sqrt())
     }
 
-    /// The contact readings of this scan ([`ContactHypothesis::ensemble`]), with the readings
-    /// of an open outline when the support's edge was not seen all round.
-    pub fn hypotheses(&self, plane_offset_m: f64) -> Vec<ContactHypothesis> {
+    /// 1σ of the contact's height, metres: the support plane's
+    /// ([`SupportPlane::height_sigma_m`] with [`ScanConfig::support_mesh_sigma_m`]), or, where
+    /// no plane was found, `contact_height_sigma_m` of `config`'s uncertainty.
+    pub fn contact_height_sigma_m(&self, config: &FragilityConfig) -> f64 {
+        self.support_plane
+            .map_or(config.uncertainty.contact_height_sigma_m, |p| {
+                p.height_sigma_m(config.scan.support_mesh_sigma_m)
+            })
+    }
+
+    /// The contact readings of this scan ([`ContactHypothesis::ensemble`]), the plane moved by
+    /// ±1.96 [`ClosedScan::contact_height_sigma_m`], with the readings of an open outline when
+    /// the support's edge was not seen all round.
+    pub fn hypotheses(&self, config: &FragilityConfig) -> Vec<ContactHypothesis> {
+        let plane_offset_m = 1.96 * self.contact_height_sigma_m(config);
         let open_gaps = self
             .support_outline
             .as_ref()
@@ -1335,14 +1396,15 @@ pub fn analyze_scan(
 
 /// The fragility of a scan closed by [`close_scan`]: [`analyze_detailed`] on the contact
 /// reading whose α_min is the median of [`ContactHypothesis::ensemble`]'s 36 readings with the
-/// support outline's unseen sectors interpolated (the plane moved by ±1.96 σ of
-/// [`super::UncertaintyConfig::contact_height_sigma_m`]); no single profile model or fit
+/// support outline's unseen sectors interpolated (the plane moved by ±1.96
+/// [`ClosedScan::contact_height_sigma_m`]); no single profile model or fit
 /// window holds for every shape of base.
 ///
 /// The 95% interval combines independent sources in quadrature
 /// ([`FragilityAnalysis::combine_interval`]), each a 95% half-width below and above α_min:
 /// - `perturbation`: the perturbation study (mesh noise and contact height);
-/// - `support_plane`: the plane moved by its ±1.96 σ, the median over the readings' models and
+/// - `support_plane`: the plane moved by its ±1.96 σ (the support's measured roughness and the
+///   mesh's error), the median over the readings' models and
 ///   fits;
 /// - `profile_model`: the spread of the readings at the measured plane;
 /// - `unseen_support_edge`: the outline's unseen sectors opened ([`OutlineGaps::Open`]), when
@@ -1383,7 +1445,7 @@ pub fn analyze_closed_scan(
     let mut unperturbed = config.clone();
     unperturbed.uncertainty.samples = 0;
     let first = analyse(&closed.contact_polygon, &unperturbed)?;
-    let hypotheses = closed.hypotheses(1.96 * config.uncertainty.contact_height_sigma_m);
+    let hypotheses = closed.hypotheses(config);
     // α_min and polygon of each reading, in the ensemble's order (`None`: no polygon); the
     // centre of mass hardly moves with the plane's millimetres, so the first analysis's
     // serves them all.
@@ -1594,6 +1656,45 @@ mod tests {
         );
     }
 
+    /// A 2 m square of flat 5 cm cells around the origin, each cell at `1 + height_of(i, j)`.
+    fn cells(height_of: impl Fn(i32, i32) -> f64) -> TriangleMesh {
+        let mut mesh = TriangleMesh::default();
+        for i in -20..20 {
+            for j in -20..20 {
+                let z = 1.0 + height_of(i, j);
+                let (x, y) = (0.05 * f64::from(i), 0.05 * f64::from(j));
+                let base = mesh.positions.len() as u32;
+                for (dx, dy) in [(0.0, 0.0), (0.05, 0.0), (0.05, 0.05), (0.0, 0.05)] {
+                    mesh.positions
+                        .push(Point3::new(x + dx, y + dy, z).cast::<f32>());
+                }
+                mesh.faces.push([base, base + 1, base + 2]);
+                mesh.faces.push([base, base + 2, base + 3]);
+            }
+        }
+        mesh
+    }
+
+    /// A flat support has no roughness; a checkerboard of cells 6 mm above and below has 6 mm,
+    /// and its plane is the higher cells' level, the one a rock rests on.
+    #[test]
+    fn the_support_roughness_is_the_spread_of_its_top() {
+        let config = ScanConfig::default();
+        let axis = Point2::origin();
+        let flat = support_plane(&cells(|_, _| 0.0), &axis, 1.05, &config).unwrap();
+        assert!((flat.height_m - 1.0).abs() < 1e-6, "{flat:?}");
+        assert!(flat.roughness_m < 1e-6, "{flat:?}");
+        let step = |i: i32, j: i32| if (i + j) % 2 == 0 { 0.006 } else { -0.006 };
+        let rough = support_plane(&cells(step), &axis, 1.05, &config).unwrap();
+        assert!((rough.height_m - 1.006).abs() < 1e-5, "{rough:?}");
+        assert!((rough.roughness_m - 0.006).abs() < 2e-4, "{rough:?}");
+        assert!((rough.height_sigma_m(0.002) - 0.00632).abs() < 2e-4);
+        // Cells 4 cm off the plane are the ground or the rock, not the support's roughness.
+        let far = |i: i32, j: i32| if (i + j) % 2 == 0 { 0.0 } else { -0.04 };
+        let far = support_plane(&cells(far), &axis, 1.05, &config).unwrap();
+        assert!(far.roughness_m < 1e-6, "{far:?}");
+    }
+
     #[test]
     fn finds_the_neck_and_closes_the_rock() {
         let scan = open_scan();
@@ -1655,7 +1756,14 @@ mod tests {
         let config = FragilityConfig::default();
         let truth = analyze(&truth, ContactSpec::Auto, &config).unwrap();
         let (closed, analysis) = analyze_scan(&scan, &config).unwrap();
-        assert!(closed.support_plane_found);
+        // The pedestal's top is flat: the plane moves by the mesh's own error only.
+        let plane = closed.support_plane.unwrap();
+        assert!(plane.roughness_m < 1e-3, "{plane:?}");
+        let widest = closed
+            .hypotheses(&config)
+            .iter()
+            .fold(0.0f64, |m, h| m.max(h.plane_offset_m.abs()));
+        assert!((widest - 1.96 * plane.height_sigma_m(0.002)).abs() < 1e-12);
         assert!(
             (closed.contact_height_m - 1.0).abs() < 0.002,
             "support plane at {}",

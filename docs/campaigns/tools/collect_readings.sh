@@ -5,12 +5,12 @@
 #   with `--mesh`, labelled gt_<parent>_<folder>;
 # - any other folder is read as a campaign (`runs/WORLD/seed-S/...`), labelled camp_<folder>_...
 #
-# usage: collect_readings.sh FRAGILITY_TOML OUT FOLDER...   (FRAGILITY_TOML may be "")
+# usage: [BIN=contact_diagnosis] collect_readings.sh FRAGILITY_TOML OUT FOLDER...   (FRAGILITY_TOML may be "")
 # e.g.   collect_readings.sh "" r.txt exp/v0/* camp/scarp_lib23
 #        interval_calibration.py r.txt
 set -e
 T=$1; O=$2; shift 2
-BIN=target/release/examples/contact_diagnosis
+BIN=${BIN:-target/release/examples/contact_diagnosis}   # or the BIN of the environment
 : > "$O"
 for d in "$@"; do
   d=${d%/}
