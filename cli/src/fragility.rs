@@ -153,8 +153,17 @@ fn interval_sources(report: &FragilityReport) -> String {
             )
         })
         .collect();
+    let sigma = report
+        .alpha_interval
+        .contact_height_sigma_m
+        .map_or(String::new(), |s| {
+            format!(
+                "contact height σ    {:.1} mm (support roughness and mesh error)\n",
+                s * 1e3
+            )
+        });
     format!(
-        "interval sources    95% half-widths, combined in quadrature\n{}",
+        "interval sources    95% half-widths, combined in quadrature\n{}{sigma}",
         lines.concat()
     )
 }

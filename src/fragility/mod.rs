@@ -376,6 +376,11 @@ pub struct AlphaInterval {
     /// the interval is α_min minus the root sum of squares of the `below_deg`, to α_min plus
     /// that of the `above_deg` (never below 0°).
     pub sources: Vec<IntervalSource>,
+    /// 1σ of a scanned contact's height, metres: the `support_plane` source moves the plane by
+    /// ±1.96 of it ([`scan::ClosedScan::contact_height_sigma_m`]: the support's measured
+    /// roughness and the mesh's error). `None` for `perturbation`.
+    #[serde(default)]
+    pub contact_height_sigma_m: Option<f64>,
 }
 
 /// One independent source of an α_min interval: how far it may move α_min at 95%.
@@ -476,6 +481,7 @@ impl FragilityAnalysis {
             contact_alpha_low_deg: contact_alphas.iter().copied().reduce(f64::min),
             contact_alpha_high_deg: contact_alphas.iter().copied().reduce(f64::max),
             sources: all,
+            contact_height_sigma_m: None,
         };
     }
 }
@@ -788,6 +794,7 @@ pub fn analyze_detailed(
                 alpha - perturbed_low,
                 perturbed_high - alpha,
             )],
+            contact_height_sigma_m: None,
         },
         uncertainty,
         up: Vector3::from(config.up).normalize().into(),

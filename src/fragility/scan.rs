@@ -1540,6 +1540,8 @@ pub fn analyze_closed_scan(
     ));
     let evaluated: Vec<f64> = alphas.iter().flatten().copied().collect();
     analysis.combine_interval(&evaluated, alphas.len() - evaluated.len(), sources);
+    analysis.report.alpha_interval.contact_height_sigma_m =
+        Some(closed.contact_height_sigma_m(config));
     Ok(analysis)
 }
 
@@ -1800,6 +1802,10 @@ mod tests {
             .iter()
             .fold(0.0f64, |m, h| m.max(h.plane_offset_m.abs()));
         assert!((widest - 1.96 * plane.height_sigma_m(0.002)).abs() < 1e-12);
+        assert_eq!(
+            analysis.report.alpha_interval.contact_height_sigma_m,
+            Some(plane.height_sigma_m(0.002))
+        );
         assert!(
             (closed.contact_height_m - 1.0).abs() < 0.002,
             "support plane at {}",
