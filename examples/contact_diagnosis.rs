@@ -124,7 +124,7 @@ fn print_readings(
             .contact_alpha_high_deg
             .unwrap_or(f64::NAN),
         near as f64 / sectors as f64,
-        closed.contact_height_m - closed.neck_height_m,
+        closed.contact_height_m() - closed.neck_height_m,
         closed.filled_area_m2 / (closed.filled_area_m2 + closed.scanned_area_m2),
         closed.support_plane.is_some(),
         a.report.rock_height_m,
@@ -157,7 +157,7 @@ fn single_mesh(args: &[String]) -> Result<()> {
     match analyze_scan(&read_mesh(mesh)?, &config) {
         Ok((closed, a)) => {
             print_readings(label, truth.alpha_min_deg, &closed, &a, &config);
-            print_plane(label, &read_mesh(mesh)?, &closed, truth.contact_height_m);
+            print_plane(label, &closed, truth.contact_height_m);
         }
         Err(e) => println!(
             "REFUSED {label} {:.3} {}",
@@ -289,45 +289,19 @@ fn print_row(label: &str, truth: &FragilityReport, a_map: f64, scan: &FragilityR
     );
 }
 
-/// `PLANE label found dh_mm` then, per radius 0.5 and 1.0 m around the profile's axis, the
-/// upward faces' area (m²) within ±3 cm of the support plane and their area-weighted mean and
-/// standard deviation of height about it, mm.
-fn print_plane(label: &str, mesh: &scarp_slam::TriangleMesh, closed: &ClosedScan, truth_z: f64) {
-    let plane = closed.contact_height_m;
-    let axis = closed.profile.axis_xy;
-    let mut out = format!(
-        "PLANE {} {} {:+.1}",
+/// `PLANE label found dh_mm roughness_mm`: whether the support plane was found, the contact
+/// height's error against the truth's `truth_z`, and the support's measured roughness
+/// ([`scarp::fragility::scan::SupportPlane::roughness_m`]; `nan` without a plane).
+fn print_plane(label: &str, closed: &ClosedScan, truth_z: f64) {
+    println!(
+        "PLANE {} {} {:+.1} {:.1}",
         label.replace(' ', "_"),
         closed.support_plane.is_some(),
-        (plane - truth_z) * 1e3
+        (closed.contact_height_m() - truth_z) * 1e3,
+        closed
+            .support_plane
+            .map_or(f64::NAN, |p| p.roughness_m * 1e3)
     );
-    for radius in [0.5, 1.0] {
-        let (mut w, mut s, mut s2) = (0.0, 0.0, 0.0);
-        for f in &mesh.faces {
-            let [a, b, c] = f.map(|v| mesh.positions[v as usize].cast::<f64>());
-            let n = (b - a).cross(&(c - a));
-            let area2 = n.norm();
-            let centre = (a.coords + b.coords + c.coords) / 3.0;
-            let h = centre.z - plane;
-            if area2 > 0.0
-                && n.z > 0.95 * area2
-                && h.abs() <= 0.03
-                && (centre.xy() - axis.coords).norm() <= radius
-            {
-                w += 0.5 * area2;
-                s += 0.5 * area2 * h;
-                s2 += 0.5 * area2 * h * h;
-            }
-        }
-        let mean = s / w;
-        out += &format!(
-            " {:.4} {:+.1} {:.1}",
-            w,
-            mean * 1e3,
-            (s2 / w - mean * mean).max(0.0).sqrt() * 1e3
-        );
-    }
-    println!("{out}");
 }
 
 fn glob_runs(dir: &Path) -> Result<Vec<PathBuf>> {

@@ -182,7 +182,7 @@ pub fn run(args: FragilityArgs) -> anyhow::Result<()> {
         let closed = close_scan(&mesh, &config.scan)
             .with_context(|| format!("closing the scan {}", args.mesh.display()))?;
         tracing::info!(
-            contact_m = closed.contact_height_m,
+            contact_m = closed.contact_height_m(),
             support_plane_m = closed.support_plane.map(|p| p.height_m),
             support_roughness_m = closed.support_plane.map(|p| p.roughness_m),
             loops = closed.filled_patches.len(),

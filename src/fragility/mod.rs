@@ -459,12 +459,14 @@ impl FragilityAnalysis {
     /// Replaces the α_min interval by one of independent sources: the perturbation study's
     /// (as [`analyze_detailed`] recorded it) and `sources`, combined in quadrature on each side.
     /// `contact_alphas` are α_min on the contact readings behind the sources (degrees;
-    /// `failed` readings gave none), reported with the interval.
+    /// `failed` readings gave none), reported with the interval, as is the contact height's
+    /// 1σ `contact_height_sigma_m` the readings moved the plane by.
     pub fn combine_interval(
         &mut self,
         contact_alphas: &[f64],
         failed: usize,
         sources: Vec<IntervalSource>,
+        contact_height_sigma_m: f64,
     ) {
         let r = &mut self.report;
         let mut all = std::mem::take(&mut r.alpha_interval.sources);
@@ -481,7 +483,7 @@ impl FragilityAnalysis {
             contact_alpha_low_deg: contact_alphas.iter().copied().reduce(f64::min),
             contact_alpha_high_deg: contact_alphas.iter().copied().reduce(f64::max),
             sources: all,
-            contact_height_sigma_m: None,
+            contact_height_sigma_m: Some(contact_height_sigma_m),
         };
     }
 }
