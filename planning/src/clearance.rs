@@ -554,6 +554,18 @@ pub enum Repair {
         /// What blocked it.
         reason: String,
     },
+    /// The mapping rings' path was routed around an obstacle on the way to or between the
+    /// rings: their start turned from the azimuth nearest the vehicle, a vertical approach, or
+    /// transitions that climb before moving across.
+    Rerouted {
+        /// Turn of the rings' start from the nearest azimuth (degrees, counter-clockwise seen
+        /// from above).
+        start_turned_deg: f64,
+        /// The first ring is approached level, then straight down or up.
+        vertical_approach: bool,
+        /// Each ring is left vertically, then the next one is reached level.
+        stepped_transitions: bool,
+    },
     /// A waypoint was inserted on the straight path to keep the trajectory near it.
     InsertedWaypoint {
         /// Index of the segment that was split.

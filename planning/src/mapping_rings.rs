@@ -369,15 +369,28 @@ pub fn plan_mapping_rings(
     camera: &CameraConfig,
     cfg: &MappingRingConfig,
 ) -> Result<RingPlan, PlanError> {
+    plan_mapping_rings_from(cylinder, start, camera, cfg, 0.0)
+}
+
+/// [`plan_mapping_rings`] with the rings' start turned `azimuth_shift_rad` (counter-clockwise
+/// seen from above) away from the azimuth nearest the start.
+fn plan_mapping_rings_from(
+    cylinder: &VerticalCylinder,
+    start: &Waypoint,
+    camera: &CameraConfig,
+    cfg: &MappingRingConfig,
+    azimuth_shift_rad: f64,
+) -> Result<RingPlan, PlanError> {
     start.validate("start")?;
     let heights = ring_heights(cylinder, camera, cfg)?;
     let half_scan = 0.5 * cfg.vertical_scan_deg.to_radians();
     let axis = cylinder.axis_point(start.position_m.z);
-    let start_azimuth = if (start.position_m.xy() - axis.xy()).norm() > 1e-6 {
-        yaw_toward(&axis, &start.position_m)
-    } else {
-        start.yaw_rad
-    };
+    let start_azimuth = azimuth_shift_rad
+        + if (start.position_m.xy() - axis.xy()).norm() > 1e-6 {
+            yaw_toward(&axis, &start.position_m)
+        } else {
+            start.yaw_rad
+        };
     let base = cfg.base_ring.enabled.then_some((
         cylinder.z_bottom_m + cfg.base_ring.height_above_bottom_m,
         cfg.base_ring.camera_pitch_down_deg,
@@ -408,8 +421,57 @@ pub fn plan_mapping_rings(
         start_azimuth,
         cfg.waypoints_per_ring,
         Vec::new(),
-        None,
+        Route::DIRECT,
     ))
+}
+
+/// How the path reaches the first ring and moves between rings.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Route {
+    /// Approach the first ring level at the higher of the start's and the ring's heights, then
+    /// straight down or up to it, rather than in a straight line.
+    vertical_approach: bool,
+    /// Between rings, climb (or descend) at the end of one ring before moving across to the
+    /// start of the next, rather than in a straight line. Over a slope, the straight line from
+    /// a widened, terrain-following base ring up to the next ring cuts toward the ground.
+    stepped_transitions: bool,
+}
+
+impl Route {
+    const DIRECT: Self = Self {
+        vertical_approach: false,
+        stepped_transitions: false,
+    };
+
+    /// Every route, the direct one first.
+    const ALL: [Self; 4] = [
+        Self::DIRECT,
+        Self {
+            vertical_approach: true,
+            stepped_transitions: false,
+        },
+        Self {
+            vertical_approach: false,
+            stepped_transitions: true,
+        },
+        Self {
+            vertical_approach: true,
+            stepped_transitions: true,
+        },
+    ];
+}
+
+/// The via point of a vertical approach from `start` to `first` (`None` when the straight line
+/// is already vertical or level at the higher height).
+fn vertical_approach_via(start: &Waypoint, first: &Point3<f64>) -> Option<Waypoint> {
+    let z = start.position_m.z.max(first.z);
+    let via = if start.position_m.z >= first.z {
+        Point3::new(first.x, first.y, z)
+    } else {
+        Point3::new(start.position_m.x, start.position_m.y, z)
+    };
+    ((via - start.position_m).norm() > 1e-6 && (via - first).norm() > 1e-6)
+        .then(|| Waypoint::new(via, start.yaw_rad))
 }
 
 fn assemble(
@@ -419,11 +481,14 @@ fn assemble(
     start_azimuth: f64,
     n: usize,
     repairs: Vec<Repair>,
-    approach_via: Option<Waypoint>,
+    route: Route,
 ) -> RingPlan {
     let mut wps = vec![*start];
-    if let Some(v) = approach_via {
-        wps.push(v);
+    if route.vertical_approach
+        && let Some(first) = rings.first()
+        && let Some(via) = vertical_approach_via(start, &first.point_at(start_azimuth))
+    {
+        wps.push(via);
     }
     let mut yaw = wps[wps.len() - 1].yaw_rad;
     let mut ranges = Vec::with_capacity(rings.len());
@@ -432,6 +497,17 @@ fn assemble(
         let toward_axis = yaw_toward(&first, &cylinder.axis_point(first.z));
         if k == 0 {
             yaw = unwrap_near(toward_axis, yaw);
+        } else if route.stepped_transitions
+            && let Some(last) = wps.last().copied()
+        {
+            let via = if first.z >= last.position_m.z {
+                Point3::new(last.position_m.x, last.position_m.y, first.z)
+            } else {
+                Point3::new(first.x, first.y, last.position_m.z)
+            };
+            if (via - last.position_m).norm() > 1e-6 && (via - first).norm() > 1e-6 {
+                wps.push(Waypoint::new(via, last.yaw_rad));
+            }
         }
         let sign = if ring.counter_clockwise { 1.0 } else { -1.0 };
         let begin = wps.len();
@@ -617,14 +693,17 @@ fn ring_clearance(
 ///
 /// A ring that comes too close is first slid up and out along its lower scan ray in steps of
 /// `ccfg.repair_step_m` (which keeps its band's bottom, so coverage is kept), then, if that
-/// fails, raised in place. A blocked approach from the start is replaced by a path that first
-/// flies level at the higher of the start and first-ring heights. Fails with
+/// fails, raised in place. When the way to or between the rings is blocked, the path is
+/// routed round it, in order: a vertical approach (level at the higher of the start and
+/// first-ring heights, then straight down or up), transitions that climb at the end of each
+/// ring before moving across, both; then the same with the rings' start turned ever farther
+/// round the rock, up to the far side ([`Repair::Rerouted`] says which). Fails with
 /// [`PlanError::TargetBelowTerrain`] if the cylinder's centre is underground, and with
 /// [`PlanError::Clearance`] if no repair within `ccfg.max_raise_m` works.
 ///
 /// When the base ring makes the plan fail (no widening or raise within its limits clears it,
-/// or the way to or from it is blocked), the plan is made again without it, and [`Repair::DroppedRing`] says so: the paper's rings alone still
-/// map the rock.
+/// or no route to or from it is clear), the plan is made again without it, and
+/// [`Repair::DroppedRing`] says so: the paper's rings alone still map the rock.
 pub fn plan_mapping_rings_clear(
     cylinder: &VerticalCylinder,
     start: &Waypoint,
@@ -633,7 +712,30 @@ pub fn plan_mapping_rings_clear(
     env: &Environment,
     ccfg: &ClearanceConfig,
 ) -> Result<RingPlan, PlanError> {
-    match plan_rings_clear_once(cylinder, start, camera, cfg, env, ccfg) {
+    let clear_from_some_start = |cfg: &MappingRingConfig| {
+        let mut first_error = None;
+        for shift_deg in RING_START_SHIFTS_DEG {
+            match plan_rings_clear_once(
+                cylinder,
+                start,
+                camera,
+                cfg,
+                env,
+                ccfg,
+                shift_deg.to_radians(),
+            ) {
+                Ok(plan) => return Ok(plan),
+                // Nothing else a start could change: the configuration, the cylinder, or a
+                // target under the terrain.
+                Err(e) if !matches!(e, PlanError::Clearance { .. }) => return Err(e),
+                Err(e) => {
+                    first_error.get_or_insert(e);
+                }
+            }
+        }
+        Err(first_error.expect("RING_START_SHIFTS_DEG is not empty"))
+    };
+    match clear_from_some_start(cfg) {
         Err(with_base) if cfg.base_ring.enabled => {
             let paper = MappingRingConfig {
                 base_ring: BaseRingConfig {
@@ -642,7 +744,7 @@ pub fn plan_mapping_rings_clear(
                 },
                 ..*cfg
             };
-            let mut plan = plan_rings_clear_once(cylinder, start, camera, &paper, env, ccfg)?;
+            let mut plan = clear_from_some_start(&paper)?;
             plan.repairs.insert(
                 0,
                 Repair::DroppedRing {
@@ -656,7 +758,17 @@ pub fn plan_mapping_rings_clear(
     }
 }
 
-/// One attempt of [`plan_mapping_rings_clear`] with `cfg` as given.
+/// Where the rings may start, as turns (degrees, counter-clockwise seen from above) from the
+/// azimuth nearest the vehicle, in the order they are tried: the nearest first, then ever
+/// farther round. A blocked approach or transition is a property of one azimuth (a boulder
+/// beside the target, a slope on one side), so another start usually clears it.
+const RING_START_SHIFTS_DEG: [f64; 12] = [
+    0.0, 30.0, -30.0, 60.0, -60.0, 90.0, -90.0, 120.0, -120.0, 150.0, -150.0, 180.0,
+];
+
+/// One attempt of [`plan_mapping_rings_clear`] with `cfg` as given and the rings' start
+/// turned `azimuth_shift_rad` from the nearest azimuth: the rings repaired one by one, then
+/// the first [`Route`] whose whole path is clear.
 fn plan_rings_clear_once(
     cylinder: &VerticalCylinder,
     start: &Waypoint,
@@ -664,6 +776,7 @@ fn plan_rings_clear_once(
     cfg: &MappingRingConfig,
     env: &Environment,
     ccfg: &ClearanceConfig,
+    azimuth_shift_rad: f64,
 ) -> Result<RingPlan, PlanError> {
     ccfg.validate()?;
     cylinder.validate()?;
@@ -671,7 +784,7 @@ fn plan_rings_clear_once(
         &cylinder.axis_point(0.5 * (cylinder.z_bottom_m + cylinder.z_top_m)),
         cfg.below_terrain_tolerance_m,
     )?;
-    let plan = plan_mapping_rings(cylinder, start, camera, cfg)?;
+    let plan = plan_mapping_rings_from(cylinder, start, camera, cfg, azimuth_shift_rad)?;
     let flown = FlownRing {
         start_azimuth_rad: plan.start_azimuth_rad,
         waypoints: cfg.waypoints_per_ring,
@@ -697,54 +810,85 @@ fn plan_rings_clear_once(
         rings.push(cand);
         repairs.push(rep);
     }
-    let n = cfg.waypoints_per_ring;
-    let mut out = assemble(
-        cylinder,
-        start,
-        rings.clone(),
-        plan.start_azimuth_rad,
-        n,
-        repairs.clone(),
-        None,
-    );
-    lift_terrain_following(&mut out, env, ccfg);
-    let mut report = env.check_path(&out.path, ccfg);
-    if !report.is_clear() {
-        // Approach level at the higher altitude, then straight down or up to the first ring.
-        let first = rings[0].point_at(plan.start_azimuth_rad);
-        let z = start.position_m.z.max(first.z);
-        let via_pos = if start.position_m.z >= first.z {
-            Point3::new(first.x, first.y, z)
-        } else {
-            Point3::new(start.position_m.x, start.position_m.y, z)
-        };
-        if (via_pos - start.position_m).norm() > 1e-6 && (via_pos - first).norm() > 1e-6 {
-            let via = Waypoint::new(via_pos, start.yaw_rad);
-            let mut alt = assemble(
-                cylinder,
-                start,
-                rings,
-                plan.start_azimuth_rad,
-                n,
-                repairs,
-                Some(via),
-            );
-            lift_terrain_following(&mut alt, env, ccfg);
-            let alt_report = env.check_path(&alt.path, ccfg);
-            if alt_report.is_clear() {
-                out = alt;
-                report = alt_report;
+    // The first route whose whole path keeps the clearance.
+    let mut first_report = None;
+    for route in Route::ALL {
+        let mut out = assemble(
+            cylinder,
+            start,
+            rings.clone(),
+            plan.start_azimuth_rad,
+            cfg.waypoints_per_ring,
+            repairs.clone(),
+            route,
+        );
+        lift_terrain_following(&mut out, env, ccfg);
+        let report = env.check_path(&out.path, ccfg);
+        if report.is_clear() {
+            if route != Route::DIRECT || azimuth_shift_rad != 0.0 {
+                out.repairs.push(Repair::Rerouted {
+                    start_turned_deg: azimuth_shift_rad.to_degrees(),
+                    vertical_approach: route.vertical_approach,
+                    stepped_transitions: route.stepped_transitions,
+                });
             }
+            out.clearance = Some(report);
+            return Ok(out);
         }
+        first_report.get_or_insert(report);
     }
-    report.ensure_clear("the approach or a ring transition is blocked")?;
-    out.clearance = Some(report);
-    Ok(out)
+    let report = first_report.expect("Route::ALL is not empty");
+    Err(report.to_error("the approach or a ring transition is blocked"))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_stepped_transition_climbs_before_it_moves_across() {
+        let cyl = VerticalCylinder::new(0.0, 0.0, 1.0, 0.0, 4.0).unwrap();
+        let start = Waypoint::new(Point3::new(10.0, 0.0, 6.0), 0.0);
+        let direct = plan_mapping_rings(
+            &cyl,
+            &start,
+            &CameraConfig::default(),
+            &MappingRingConfig::default(),
+        )
+        .unwrap();
+        assert!(direct.rings.len() >= 2);
+        // The base ring widened, as a clearance repair does: the next ring starts inward.
+        let mut rings = direct.rings.clone();
+        rings[0].radius_m += 1.0;
+        let stepped = Route {
+            vertical_approach: false,
+            stepped_transitions: true,
+        };
+        let plan = assemble(
+            &cyl,
+            &start,
+            rings,
+            direct.start_azimuth_rad,
+            15,
+            Vec::new(),
+            stepped,
+        );
+        let wps = &plan.path.waypoints;
+        for pair in plan.ring_waypoints.windows(2) {
+            let (last, via, first) = (
+                wps[pair[0].end - 1].position_m,
+                wps[pair[0].end].position_m,
+                wps[pair[1].start].position_m,
+            );
+            assert_eq!(
+                pair[0].end + 1,
+                pair[1].start,
+                "one via point between rings"
+            );
+            assert_eq!((via.x, via.y), (last.x, last.y), "straight up first");
+            assert_eq!(via.z, first.z, "then level across");
+        }
+    }
 
     #[test]
     fn two_metre_rock_gets_one_ring_and_full_coverage() {

@@ -34,3 +34,57 @@ pub fn world_obstacles(world: &World) -> impl Iterator<Item = (String, &scarp_sl
         )
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mission::config::MissionConfig;
+    use crate::mission::mapping::{cylinder_around, cylinder_radius_m};
+    use nalgebra::{Point3, Vector3};
+    use scarp_planning::prelude::{Repair, Waypoint, plan_mapping_rings_clear};
+
+    /// Starts from which the straight way to the default world's rock 1 (its cylinder 0.5 m
+    /// south of the truth, as a localization error puts it) is blocked, found by
+    /// `examples/ring_plan_survey.rs`: the base ring used to be dropped from both. One is
+    /// cleared by climbing between the rings before moving across, the other by starting the
+    /// rings elsewhere round the rock.
+    #[test]
+    fn a_blocked_way_to_the_rings_is_rerouted_and_the_base_ring_kept() {
+        let world = World::builtin_default().unwrap();
+        let env = planning_environment(&world).unwrap();
+        let config = MissionConfig::default();
+        let rock = world.rocks.iter().find(|r| r.id == 1).unwrap();
+        let points: Vec<Point3<f64>> = rock.mesh.positions.iter().map(|p| p.cast()).collect();
+        let radius_m = cylinder_radius_m(&points, &rock.centroid, &config.cylinder);
+        let centre = rock.centroid - Vector3::new(0.0, 0.5, 0.0);
+        let ground_m = world.terrain_height_m(centre.x, centre.y);
+        let cylinder = cylinder_around(&centre, radius_m, ground_m, &config.cylinder).unwrap();
+        let planning = &config.planning;
+        for (start_m, stepped, turned) in [
+            ([-12.0234, 13.1438, 4.0359], true, false),
+            ([-11.0284, 9.9459, 4.0607], false, true),
+        ] {
+            let start = Waypoint::new(Point3::from(start_m), 0.0);
+            let plan = plan_mapping_rings_clear(
+                &cylinder,
+                &start,
+                &planning.camera,
+                &planning.mapping,
+                &env,
+                &planning.clearance,
+            )
+            .unwrap();
+            assert!(plan.flies_base_ring(), "{:?}", plan.repairs);
+            assert!(plan.clearance.as_ref().unwrap().is_clear());
+            let rerouted = plan.repairs.iter().find_map(|r| match r {
+                Repair::Rerouted {
+                    start_turned_deg,
+                    stepped_transitions,
+                    ..
+                } => Some((*stepped_transitions, *start_turned_deg != 0.0)),
+                _ => None,
+            });
+            assert_eq!(rerouted, Some((stepped, turned)), "{:?}", plan.repairs);
+        }
+    }
+}
