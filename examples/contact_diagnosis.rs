@@ -225,6 +225,26 @@ fn main() -> Result<()> {
             world_mesh.transform(&world_from_map(&target_dir)?);
             if std::env::var("PROFILE").is_ok_and(|v| v == label) {
                 print_profiles(&truth, &rock.mesh, &world_mesh);
+                let polygon = |name: &str, r: &FragilityReport| {
+                    let xy: Vec<String> = r
+                        .contact_polygon
+                        .iter()
+                        .map(|p| format!("({:.3},{:.3})", p[0], p[1]))
+                        .collect();
+                    println!(
+                        "{name}: α {:.2} at azimuth {:.0}°, com ({:.3},{:.3},{:.3}), contact {}",
+                        r.alpha_min_deg,
+                        r.alpha_min_azimuth_deg,
+                        r.center_of_mass[0],
+                        r.center_of_mass[1],
+                        r.center_of_mass[2],
+                        xy.join(" ")
+                    );
+                };
+                polygon("truth", &truth);
+                if let Ok((_, a)) = analyze_scan(&world_mesh, &config) {
+                    polygon("scan", &a.report);
+                }
             }
             match (map_alpha, analyze_scan(&world_mesh, &config)) {
                 (Ok(a_map), Ok((_, analysis))) => {

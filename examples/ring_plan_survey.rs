@@ -16,12 +16,12 @@
 use std::collections::BTreeMap;
 
 use anyhow::{Context, Result};
-use nalgebra::Point3;
+use nalgebra::{Point3, Vector3};
 use scarp::mission::config::MissionConfig;
 use scarp::mission::environment::planning_environment;
-use scarp::mission::mapping::{cylinder_around, cylinder_radius_m};
+use scarp::mission::mapping::rock_cylinder;
 use scarp_datasets::world::{RockRole, World};
-use scarp_planning::prelude::{Repair, VerticalCylinder, Waypoint, plan_mapping_rings_clear};
+use scarp_planning::prelude::{Repair, Waypoint};
 
 /// The class of a plan's outcome: `flown`, `dropped: <what blocked it>` or `error`.
 fn outcome(plan: &Result<scarp_planning::prelude::RingPlan, impl std::fmt::Display>) -> String {
@@ -74,14 +74,10 @@ fn main() -> Result<()> {
         let world = World::from_name_or_path(name).with_context(|| format!("world {name}"))?;
         let env = planning_environment(&world)?;
         for rock in world.rocks.iter().filter(|r| r.role == RockRole::Target) {
-            let points: Vec<Point3<f64>> = rock.mesh.positions.iter().map(|p| p.cast()).collect();
-            let radius_m = cylinder_radius_m(&points, &rock.centroid, &config.cylinder);
             let mut counts: BTreeMap<String, usize> = BTreeMap::new();
             for (dx, dy) in [(0.0, 0.0), (0.0, 0.5), (0.5, 0.0), (0.0, -0.5), (-0.5, 0.0)] {
-                let centre = rock.centroid + nalgebra::Vector3::new(dx, dy, 0.0);
-                let ground_m = world.terrain_height_m(centre.x, centre.y);
-                let cylinder: VerticalCylinder =
-                    cylinder_around(&centre, radius_m, ground_m, &config.cylinder)?;
+                let shift = Vector3::new(dx, dy, 0.0);
+                let cylinder = rock_cylinder(&world, rock, &shift, &config.cylinder)?;
                 for k in 0..16 {
                     let azimuth = std::f64::consts::TAU * f64::from(k) / 16.0;
                     for distance_m in [2.0, 5.0, 10.0] {
@@ -103,14 +99,7 @@ fn main() -> Result<()> {
                                     .or_default() += 1;
                                 continue;
                             }
-                            let plan = plan_mapping_rings_clear(
-                                &cylinder,
-                                &start,
-                                &planning.camera,
-                                &planning.mapping,
-                                &env,
-                                &planning.clearance,
-                            );
+                            let plan = planning.rings_around(&cylinder, &start, &env);
                             let class = outcome(&plan);
                             if std::env::var_os("SURVEY_CASES").is_some()
                                 && class.contains("rerouted")

@@ -14,10 +14,9 @@ use scarp_planning::plot::{PlotConfig, PlotScene, write_side_view_png, write_top
 use scarp_planning::prelude::*;
 use serde::Serialize;
 
-use scarp::mission::config::{CylinderEstimateConfig, MissionConfig};
+use scarp::mission::config::MissionConfig;
 use scarp::mission::environment::planning_environment;
-use scarp::mission::mapping::{cylinder_around, cylinder_radius_m};
-use scarp_datasets::world::Rock;
+use scarp::mission::mapping::rock_cylinder;
 use scarp_planning::camera::body_from_camera_at_pitch;
 
 use crate::simulate::load_config;
@@ -50,21 +49,6 @@ pub struct PlanArgs {
     pub json: bool,
 }
 
-/// The cylinder a mission maps rock `rock` in, built as the mission builds it
-/// ([`cylinder_radius_m`], [`cylinder_around`]) but from the truth: the rock's centroid for
-/// the localized centre, its mesh's vertices for the localized points, and the terrain under
-/// the centroid for the ground the depth camera measures.
-fn mission_cylinder(
-    world: &World,
-    rock: &Rock,
-    config: &CylinderEstimateConfig,
-) -> anyhow::Result<VerticalCylinder> {
-    let points: Vec<Point3<f64>> = rock.mesh.positions.iter().map(|p| p.cast()).collect();
-    let radius_m = cylinder_radius_m(&points, &rock.centroid, config);
-    let ground_m = world.terrain_height_m(rock.centroid.x, rock.centroid.y);
-    Ok(cylinder_around(&rock.centroid, radius_m, ground_m, config)?)
-}
-
 /// The target cylinder named by `--target`.
 fn target_cylinder(
     world: &World,
@@ -75,7 +59,12 @@ fn target_cylinder(
         let rock = world
             .rock(id)
             .with_context(|| format!("--target {id}: the world has no rock {id}"))?;
-        return mission_cylinder(world, rock, &config.cylinder);
+        return Ok(rock_cylinder(
+            world,
+            rock,
+            &Vector3::zeros(),
+            &config.cylinder,
+        )?);
     }
     let values: Vec<f64> = args
         .target
@@ -173,15 +162,9 @@ pub fn run(args: PlanArgs) -> anyhow::Result<()> {
         Point3::new(start_xy.0, start_xy.1, start_z),
         std::f64::consts::PI,
     );
-    let rings = plan_mapping_rings_clear(
-        &cylinder,
-        &start,
-        &config.camera,
-        &config.mapping,
-        &env,
-        &config.clearance,
-    )
-    .context("planning the mapping rings")?;
+    let rings = config
+        .rings_around(&cylinder, &start, &env)
+        .context("planning the mapping rings")?;
     let (trajectory, _clearance, repairs) = plan_clear_trajectory(
         &rings.path,
         &StartState::default(),

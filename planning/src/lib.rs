@@ -90,6 +90,29 @@ pub struct PlanningConfig {
     pub flight: flight::FlightConfig,
 }
 
+impl PlanningConfig {
+    /// [`mapping_rings::plan_mapping_rings_clear`] with this configuration's camera, rings and
+    /// clearance: the rings around `cylinder` from `start`, clear of `env`.
+    ///
+    /// # Errors
+    /// Those of [`mapping_rings::plan_mapping_rings_clear`].
+    pub fn rings_around(
+        &self,
+        cylinder: &geometry::VerticalCylinder,
+        start: &geometry::Waypoint,
+        env: &clearance::Environment,
+    ) -> Result<mapping_rings::RingPlan, PlanError> {
+        mapping_rings::plan_mapping_rings_clear(
+            cylinder,
+            start,
+            &self.camera,
+            &self.mapping,
+            env,
+            &self.clearance,
+        )
+    }
+}
+
 /// The types and functions most callers need.
 pub mod prelude {
     pub use crate::PlanningConfig;

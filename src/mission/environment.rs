@@ -39,9 +39,9 @@ pub fn world_obstacles(world: &World) -> impl Iterator<Item = (String, &scarp_sl
 mod tests {
     use super::*;
     use crate::mission::config::MissionConfig;
-    use crate::mission::mapping::{cylinder_around, cylinder_radius_m};
+    use crate::mission::mapping::rock_cylinder;
     use nalgebra::{Point3, Vector3};
-    use scarp_planning::prelude::{Repair, Waypoint, plan_mapping_rings_clear};
+    use scarp_planning::prelude::{Repair, Waypoint};
 
     /// Starts from which the straight way to the default world's rock 1 (its cylinder 0.5 m
     /// south of the truth, as a localization error puts it) is blocked, found by
@@ -54,26 +54,17 @@ mod tests {
         let env = planning_environment(&world).unwrap();
         let config = MissionConfig::default();
         let rock = world.rocks.iter().find(|r| r.id == 1).unwrap();
-        let points: Vec<Point3<f64>> = rock.mesh.positions.iter().map(|p| p.cast()).collect();
-        let radius_m = cylinder_radius_m(&points, &rock.centroid, &config.cylinder);
-        let centre = rock.centroid - Vector3::new(0.0, 0.5, 0.0);
-        let ground_m = world.terrain_height_m(centre.x, centre.y);
-        let cylinder = cylinder_around(&centre, radius_m, ground_m, &config.cylinder).unwrap();
-        let planning = &config.planning;
+        let south = Vector3::new(0.0, -0.5, 0.0);
+        let cylinder = rock_cylinder(&world, rock, &south, &config.cylinder).unwrap();
         for (start_m, stepped, turned) in [
             ([-12.0234, 13.1438, 4.0359], true, false),
             ([-11.0284, 9.9459, 4.0607], false, true),
         ] {
             let start = Waypoint::new(Point3::from(start_m), 0.0);
-            let plan = plan_mapping_rings_clear(
-                &cylinder,
-                &start,
-                &planning.camera,
-                &planning.mapping,
-                &env,
-                &planning.clearance,
-            )
-            .unwrap();
+            let plan = config
+                .planning
+                .rings_around(&cylinder, &start, &env)
+                .unwrap();
             assert!(plan.flies_base_ring(), "{:?}", plan.repairs);
             assert!(plan.clearance.as_ref().unwrap().is_clear());
             let rerouted = plan.repairs.iter().find_map(|r| match r {

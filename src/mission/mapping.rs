@@ -117,6 +117,27 @@ pub fn cylinder_around(
     )?)
 }
 
+/// The cylinder a mission maps `rock` in, built as the mission builds it ([`cylinder_radius_m`],
+/// [`cylinder_around`]) but from the truth: the rock's centroid moved by `shift_m` (world
+/// metres; zero, or a localization error) for the localized centre, its mesh's vertices for
+/// the localized points, and the terrain under that centre for the ground the depth camera
+/// measures. For planning studies and tests that fly the mission's rings without a mission.
+///
+/// # Errors
+/// A rock whose size makes no valid cylinder.
+pub fn rock_cylinder(
+    world: &World,
+    rock: &scarp_datasets::world::Rock,
+    shift_m: &Vector3<f64>,
+    config: &CylinderEstimateConfig,
+) -> MissionResult<VerticalCylinder> {
+    let points: Vec<Point3<f64>> = rock.mesh.positions.iter().map(|p| p.cast()).collect();
+    let radius_m = cylinder_radius_m(&points, &rock.centroid, config);
+    let centre = rock.centroid + shift_m;
+    let ground_m = world.terrain_height_m(centre.x, centre.y);
+    cylinder_around(&centre, radius_m, ground_m, config)
+}
+
 /// `old` moved to where the detector sees its target in `frame` (taken at
 /// `world_from_camera`): the box nearest the cylinder's middle (within a quarter of the image),
 /// whole in the image, gives the centre from the depth inside it ([`center_in_box`]). `None`

@@ -16,7 +16,7 @@ use scarp_datasets::world::World;
 use scarp_export::tum::{StampedPose, write_tum_trajectory};
 use scarp_planning::prelude::{
     Environment, RingPlan, SearchArea, VerticalCylinder, Waypoint, plan_fine_localization_clear,
-    plan_lawn_mower_clear, plan_mapping_rings_clear,
+    plan_lawn_mower_clear,
 };
 use scarp_slam::{PinholeCamera, RgbdFrame};
 
@@ -784,13 +784,10 @@ impl<'a> Mission<'a> {
     /// them; on an error the current trajectory is kept.
     fn fly_rings_around(&mut self, cylinder: &VerticalCylinder) -> MissionResult<RingPlan> {
         let config = &self.inputs.config;
-        let rings = plan_mapping_rings_clear(
+        let rings = config.planning.rings_around(
             cylinder,
             &self.sensors.vehicle().current_waypoint(),
-            &config.planning.camera,
-            &config.planning.mapping,
             &self.env,
-            &config.planning.clearance,
         )?;
         self.sensors.vehicle_mut().follow(
             &rings.path.waypoints[1..],

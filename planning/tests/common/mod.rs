@@ -64,12 +64,5 @@ pub fn plan_rings(
     env: &Environment,
     cfg: &PlanningConfig,
 ) -> Result<RingPlan, PlanError> {
-    plan_mapping_rings_clear(
-        cylinder,
-        start,
-        &cfg.camera,
-        &cfg.mapping,
-        env,
-        &cfg.clearance,
-    )
+    cfg.rings_around(cylinder, start, env)
 }
