@@ -55,7 +55,13 @@ fn outcome(plan: &Result<scarp_planning::prelude::RingPlan, impl std::fmt::Displ
             Some(reason) if reason.contains("transition") => {
                 "dropped: approach or transition".into()
             }
-            Some(_) => "dropped: the ring itself".into(),
+            Some(reason) => format!(
+                "dropped: the ring itself, near {}",
+                reason
+                    .split_once('[')
+                    .and_then(|(_, r)| r.split_once(']'))
+                    .map_or("?", |(what, _)| what)
+            ),
         },
     }
 }

@@ -79,6 +79,89 @@ pub struct MappingSession {
 /// (see [`cylinder_seen_in_frame`]).
 pub const RECENTER_ATTEMPTS: usize = 20;
 
+/// Two frames' views of the target ([`cylinder_seen_in_frame`]) agree when their centres are
+/// within this of each other, horizontally, metres. A box on the rock, seen from two frames in
+/// a row, puts it within 0.05–0.28 m of itself (campaign seeds 32–34); the moves that broke a
+/// map (a box on a neighbour or on the background's depth) jumped by 0.6–1.9 m from one frame
+/// to the next.
+pub const RECENTER_AGREEMENT_M: f64 = 0.4;
+
+/// What to do with a frame before the map's first one: see [`Recentering::step`].
+#[derive(Debug, Clone, PartialEq)]
+pub enum RecenterStep {
+    /// Do not map this frame; look again in the next one.
+    Wait,
+    /// Move the map's cylinder here (`moved_m` horizontally from the localization's), then map
+    /// the frame if the moved cylinder is in view.
+    Move {
+        /// The cylinder where the frame sees the target.
+        cylinder: VerticalCylinder,
+        /// How far it moved, metres.
+        moved_m: f64,
+    },
+    /// Map the frame with the cylinder as it is.
+    Map,
+}
+
+/// Moving the map's cylinder onto where the first mapped frames see the target, before the
+/// map's frame is anchored (`mapping.recenter_on_first_frame`). A single frame's box can sit on
+/// a neighbouring rock or take the background's depth, and a map started around the wrong
+/// place cuts its rock off; so a move is made only when two views agree within
+/// [`RECENTER_AGREEMENT_M`], and after [`RECENTER_ATTEMPTS`] frames without that the map
+/// starts where the localization put the cylinder.
+#[derive(Debug, Clone, Default)]
+pub struct Recentering {
+    attempts: usize,
+    /// The last view not yet confirmed by another.
+    pending: Option<VerticalCylinder>,
+    /// A move was made (or the attempts are spent): map every frame from now on.
+    settled: bool,
+}
+
+impl Recentering {
+    /// Takes one frame's view of the target, `seen` ([`cylinder_seen_in_frame`]'s: where it
+    /// sees the target and how far that is from the localization's cylinder, or `None`), and
+    /// says what to do with the frame.
+    pub fn step(&mut self, seen: Option<(VerticalCylinder, f64)>) -> RecenterStep {
+        if self.settled {
+            return RecenterStep::Map;
+        }
+        self.attempts += 1;
+        let agreed = match (&seen, &self.pending) {
+            (Some((now, _)), Some(before)) => {
+                (now.center_x_m - before.center_x_m).hypot(now.center_y_m - before.center_y_m)
+                    <= RECENTER_AGREEMENT_M
+            }
+            _ => false,
+        };
+        match seen {
+            Some((cylinder, moved_m)) if agreed => {
+                self.settled = true;
+                RecenterStep::Move { cylinder, moved_m }
+            }
+            Some((cylinder, _)) => {
+                self.pending = Some(cylinder);
+                self.wait_or_map()
+            }
+            None => self.wait_or_map(),
+        }
+    }
+
+    /// Whether the cylinder is settled: every frame from now on is mapped as it is.
+    pub fn is_settled(&self) -> bool {
+        self.settled
+    }
+
+    fn wait_or_map(&mut self) -> RecenterStep {
+        if self.attempts >= RECENTER_ATTEMPTS {
+            self.settled = true;
+            RecenterStep::Map
+        } else {
+            RecenterStep::Wait
+        }
+    }
+}
+
 /// The mapping cylinder's radius around `center` (world, m): the configured quantile of the
 /// localization points' horizontal distances from it, clamped to the configured range.
 pub fn cylinder_radius_m(
@@ -725,6 +808,40 @@ fn score_against_ground_truth(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_map_cylinder_moves_only_where_two_views_agree() {
+        let at = |x: f64, y: f64| {
+            let cylinder = VerticalCylinder::new(x, y, 0.8, -0.2, 2.0).unwrap();
+            Some((cylinder, x.hypot(y)))
+        };
+        // A jump to a neighbour, then the rock twice: the move waits for the two alike.
+        let mut r = Recentering::default();
+        assert_eq!(r.step(at(2.5, 0.0)), RecenterStep::Wait);
+        assert_eq!(r.step(at(0.6, 0.1)), RecenterStep::Wait);
+        assert_eq!(r.step(None), RecenterStep::Wait);
+        match r.step(at(0.7, 0.2)) {
+            RecenterStep::Move { cylinder, moved_m } => {
+                assert_eq!((cylinder.center_x_m, cylinder.center_y_m), (0.7, 0.2));
+                assert!((moved_m - 0.7f64.hypot(0.2)).abs() < 1e-12);
+            }
+            other => panic!("{other:?}"),
+        }
+        assert!(r.is_settled());
+        assert_eq!(r.step(at(3.0, 0.0)), RecenterStep::Map);
+        // Views that never agree leave the cylinder where the localization put it.
+        let mut r = Recentering::default();
+        let steps: Vec<RecenterStep> = (0..RECENTER_ATTEMPTS)
+            .map(|k| r.step(at(if k % 2 == 0 { 1.0 } else { -1.0 }, 0.0)))
+            .collect();
+        assert!(
+            steps[..RECENTER_ATTEMPTS - 1]
+                .iter()
+                .all(|s| *s == RecenterStep::Wait)
+        );
+        assert_eq!(steps[RECENTER_ATTEMPTS - 1], RecenterStep::Map);
+        assert_eq!(r.step(at(1.0, 0.0)), RecenterStep::Map);
+    }
 
     #[test]
     fn an_empty_map_moves_its_region_and_a_started_one_refuses() {

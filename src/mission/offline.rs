@@ -40,8 +40,8 @@ use scarp_slam::PinholeCamera;
 use super::catalog::{Catalog, MissionTarget, TargetStatus};
 use super::config::MissionConfig;
 use super::mapping::{
-    MappingSession, RECENTER_ATTEMPTS, cylinder_around, cylinder_radius_m, cylinder_seen_in_frame,
-    finish_target, mapped_status,
+    MappingSession, RecenterStep, Recentering, cylinder_around, cylinder_radius_m,
+    cylinder_seen_in_frame, finish_target, mapped_status,
 };
 use super::mode::{FlightLogEntry, Mode};
 use super::perception::{Perception, TargetState};
@@ -244,7 +244,7 @@ pub fn process_flight(inputs: &ProcessInputs<'_>) -> MissionResult<MissionReport
     }
 
     // 3. Mapping: one session per target.
-    let mut sessions: Vec<(MappingSession, usize, Option<u32>)> = Vec::new();
+    let mut sessions: Vec<(MappingSession, Recentering, Option<u32>)> = Vec::new();
     for plan in &plans {
         let state = &plan.state;
         let cylinder = target_cylinder(&flight, &camera, plan, config)?;
@@ -259,7 +259,7 @@ pub fn process_flight(inputs: &ProcessInputs<'_>) -> MissionResult<MissionReport
         sessions.push((
             MappingSession::new(state.id, &cylinder, &camera, config)?
                 .without_coverage_requirement(),
-            0,
+            Recentering::default(),
             plan.map_frames_of,
         ));
     }
@@ -282,25 +282,25 @@ pub fn process_flight(inputs: &ProcessInputs<'_>) -> MissionResult<MissionReport
             let frame = flight.images()?;
             timings.render_s += clock.elapsed().as_secs_f64();
             for k in wanted {
-                let (session, attempts, _) = &mut sessions[k];
+                let (session, recentering, _) = &mut sessions[k];
                 let clock = Instant::now();
                 if config.mapping.recenter_on_first_frame
                     && session.is_empty()
-                    && *attempts < RECENTER_ATTEMPTS
+                    && !recentering.is_settled()
                 {
-                    *attempts += 1;
                     let old = *session.cylinder();
-                    match cylinder_seen_in_frame(
+                    let seen = cylinder_seen_in_frame(
                         &mut perception,
                         &frame,
                         &camera,
                         estimate,
                         &old,
                         config.cylinder.max_recenter_m,
-                    )? {
-                        Some((cylinder, moved_m)) => {
+                    )?;
+                    match recentering.step(seen) {
+                        RecenterStep::Move { cylinder, moved_m } => {
                             tracing::info!(
-                                "target {}: map cylinder moved {moved_m:.2} m to where frame {index} sees it",
+                                "target {}: map cylinder moved {moved_m:.2} m to where frame {index} and the one before see it",
                                 session.target_id()
                             );
                             session.recenter(&cylinder, config)?;
@@ -310,12 +310,13 @@ pub fn process_flight(inputs: &ProcessInputs<'_>) -> MissionResult<MissionReport
                                 target.cylinder = Some(cylinder);
                             }
                         }
-                        // Unseen: wait for a frame that sees it, as the live mission does.
-                        None if *attempts < RECENTER_ATTEMPTS => {
+                        // Unseen, or not yet seen twice alike: wait for another frame, as the
+                        // live mission does.
+                        RecenterStep::Wait => {
                             timings.map_s += clock.elapsed().as_secs_f64();
                             continue;
                         }
-                        None => {}
+                        RecenterStep::Map => {}
                     }
                 }
                 session.process(frame.clone(), estimate, None)?;

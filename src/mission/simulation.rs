@@ -34,10 +34,8 @@ use super::report::{MissionReport, ModeChange, StageTimings};
 use super::safety::SafetyLog;
 use super::sensors::{Sensors, Simulated};
 
-/// Frames tried (at the map camera rate: 1 s) to see the target before its map starts anyway
-/// (`Mission::recenter_map_on_first_frame`).
 use super::mapping::{
-    RECENTER_ATTEMPTS, cylinder_around, cylinder_radius_m, cylinder_seen_in_frame,
+    RecenterStep, Recentering, cylinder_around, cylinder_radius_m, cylinder_seen_in_frame,
 };
 
 /// Where the lawn-mower was left, to resume it.
@@ -140,8 +138,8 @@ pub struct Mission<'a> {
     /// The last FineLocalize depth image and its estimated pose: where the ground under a
     /// target is, in the frame the vehicle flies in.
     last_depth: Option<(scarp_slam::image::DepthImage, Isometry3<f64>)>,
-    /// Frames tried so far to see the target being mapped before its first mapped frame.
-    recenter_attempts: usize,
+    /// Where the first frames of the target being mapped see it, before its map starts.
+    recentering: Recentering,
     /// Per perception target: the sum of the estimator's position error (estimate − truth) over
     /// the frames that updated its localization, and their count (ground-truth bookkeeping).
     estimator_error_by_target: EstimatorErrorByTarget,
@@ -235,7 +233,7 @@ impl<'a> Mission<'a> {
             monitor: SafetyMonitor::new(&config.safety),
             crashed: false,
             last_depth: None,
-            recenter_attempts: 0,
+            recentering: Recentering::default(),
             estimator_error_by_target: EstimatorErrorByTarget::default(),
             inputs,
         })
@@ -717,14 +715,15 @@ impl<'a> Mission<'a> {
     }
 
     /// Just before the first frame is mapped (which anchors the map frame at this frame's
-    /// state estimate), moves the cylinder to where the detector sees the target in this very
-    /// frame. The cylinder came from the localization, seconds earlier: the GPS walk since
-    /// then (τ = 30 s, 0.5–1.4 m over the transit to the rings in the default world) would
-    /// otherwise offset the rock in its region of interest and cut it.
+    /// state estimate), moves the cylinder to where the detector sees the target in the first
+    /// frames (two that agree: [`Recentering`]). The cylinder came from the localization,
+    /// seconds earlier: the GPS walk since then (τ = 30 s, 0.5–1.4 m over the transit to the
+    /// rings in the default world) would otherwise offset the rock in its region of interest
+    /// and cut it.
     ///
-    /// Returns whether to map this frame: a frame whose box is missed or clipped by the image
-    /// border is skipped (the map stays unanchored) for up to [`RECENTER_ATTEMPTS`] frames;
-    /// then the map starts where the localization put the cylinder.
+    /// Returns whether to map this frame: frames are skipped (the map stays unanchored) until
+    /// two views agree, or for up to [`super::mapping::RECENTER_ATTEMPTS`] frames; then the
+    /// map starts where the localization put the cylinder.
     fn recenter_map_on_first_frame(
         &mut self,
         id: u32,
@@ -739,11 +738,10 @@ impl<'a> Mission<'a> {
         if !config.mapping.recenter_on_first_frame
             || !session.is_empty()
             || !session.would_map(estimate)
-            || self.recenter_attempts >= RECENTER_ATTEMPTS
+            || self.recentering.is_settled()
         {
             return Ok(true);
         }
-        self.recenter_attempts += 1;
         let old = *session.cylinder();
         let seen = cylinder_seen_in_frame(
             &mut self.perception,
@@ -753,11 +751,13 @@ impl<'a> Mission<'a> {
             &old,
             config.cylinder.max_recenter_m,
         )?;
-        let Some((cylinder, moved_m)) = seen else {
-            return Ok(self.recenter_attempts >= RECENTER_ATTEMPTS);
+        let (cylinder, moved_m) = match self.recentering.step(seen) {
+            RecenterStep::Wait => return Ok(false),
+            RecenterStep::Map => return Ok(true),
+            RecenterStep::Move { cylinder, moved_m } => (cylinder, moved_m),
         };
         tracing::info!(
-            "target {id}: map cylinder moved {moved_m:.2} m to where the first mapped frame sees it"
+            "target {id}: map cylinder moved {moved_m:.2} m to where the first mapped frames see it"
         );
         if let Some(session) = self.mapping.as_mut() {
             session.recenter(&cylinder, &self.inputs.config)?;
@@ -829,7 +829,7 @@ impl<'a> Mission<'a> {
         match result {
             Ok(rings) => {
                 self.adopt_rings(id, rings);
-                self.recenter_attempts = 0;
+                self.recentering = Recentering::default();
                 self.mapping = Some(MappingSession::new(
                     id,
                     &cylinder,
