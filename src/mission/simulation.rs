@@ -776,7 +776,8 @@ impl<'a> Mission<'a> {
             m.report.cylinder_center_xy = [cylinder.center_x_m, cylinder.center_y_m];
             m.cylinder = Some(cylinder);
         }
-        // Moved, the cylinder may fall out of this frame's view: try again on the next one.
+        // Moved, the cylinder may fall out of this frame's view: the session then skips frames
+        // until one sees it.
         Ok(self.mapping.as_ref().is_some_and(|s| s.would_map(estimate)))
     }
 
