@@ -223,6 +223,7 @@ fn main() -> Result<()> {
             let map_alpha = map_analysis.map(|r| r.alpha_min_deg);
             let mut world_mesh = mesh.clone();
             world_mesh.transform(&world_from_map(&target_dir)?);
+            let world_analysis = analyze_scan(&world_mesh, &config);
             if std::env::var("PROFILE").is_ok_and(|v| v == label) {
                 print_profiles(&truth, &rock.mesh, &world_mesh);
                 let polygon = |name: &str, r: &FragilityReport| {
@@ -242,11 +243,11 @@ fn main() -> Result<()> {
                     );
                 };
                 polygon("truth", &truth);
-                if let Ok((_, a)) = analyze_scan(&world_mesh, &config) {
+                if let Ok((_, a)) = &world_analysis {
                     polygon("scan", &a.report);
                 }
             }
-            match (map_alpha, analyze_scan(&world_mesh, &config)) {
+            match (map_alpha, world_analysis) {
                 (Ok(a_map), Ok((_, analysis))) => {
                     print_row(&label, &truth, a_map, &analysis.report);
                     errors.push(a_map - truth.alpha_min_deg);

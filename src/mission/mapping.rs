@@ -126,15 +126,14 @@ impl Recentering {
             return RecenterStep::Map;
         }
         self.attempts += 1;
-        let agreed = match (&seen, &self.pending) {
-            (Some((now, _)), Some(before)) => {
+        let agrees = |now: &VerticalCylinder| {
+            self.pending.is_some_and(|before| {
                 (now.center_x_m - before.center_x_m).hypot(now.center_y_m - before.center_y_m)
                     <= RECENTER_AGREEMENT_M
-            }
-            _ => false,
+            })
         };
         match seen {
-            Some((cylinder, moved_m)) if agreed => {
+            Some((cylinder, moved_m)) if agrees(&cylinder) => {
                 self.settled = true;
                 RecenterStep::Move { cylinder, moved_m }
             }
