@@ -370,6 +370,19 @@ fn refine(
             serde_json::to_value(residuals)?,
         );
     }
+    // The same observations re-triangulated through the odometry's and the adjustment's
+    // poses: beside the truth's, they say whether the adjustment fits the images better than
+    // the ground truth does (then the ground truth, or the camera model, limits the ATE).
+    for (key, poses) in [
+        (
+            "ba_landmark_residuals_odometry",
+            &keyframes.set.world_from_camera_odometry,
+        ),
+        ("ba_landmark_residuals_after", &refined.world_from_camera),
+    ] {
+        let residuals = reprojection_stats(&seq.camera, poses, &refined.tracks);
+        extra.insert(key.into(), serde_json::to_value(residuals)?);
+    }
     // Every frame at its odometry pose corrected by its keyframe's adjustment: a frame is
     // tracked against the last keyframe, so it moves with that keyframe.
     let corrected = correct_all_frames(keyframes, &refined.world_from_camera);

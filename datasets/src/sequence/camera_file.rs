@@ -4,6 +4,7 @@ use std::path::Path;
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use scarp_slam::PinholeCamera;
+use scarp_slam::image::LensDistortion;
 use serde::{Deserialize, Serialize};
 
 use crate::DatasetError;
@@ -45,6 +46,15 @@ pub struct CameraFile {
     /// [`super::Sequence`] yields are registered whatever `depth_registered` says.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub color: Option<ColorCameraFile>,
+    /// The lens distortion of the images the top-level intrinsics describe (the `[distortion]`
+    /// table: OpenCV's `k1`, `k2`, `p1`, `p2` and optional `k3`). Absent for a pinhole, as
+    /// rendered sequences and undistorted datasets are. TUM RGB-D's freiburg1 and freiburg2
+    /// images are distorted, and their depth is registered to the distorted colour, so one
+    /// table serves both. Each frame is resampled into the pinhole camera of the same
+    /// intrinsics on load ([`scarp_slam::image::Undistortion`]); with a `[color]` table it
+    /// describes the depth camera, and the colour is registered to the undistorted depth.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub distortion: Option<LensDistortion>,
 }
 
 /// The `[color]` table of `camera.toml`: the colour camera's intrinsics (pixels) and its pose
@@ -109,6 +119,7 @@ impl CameraFile {
             depth_registered: true,
             color: None,
             depth_sigma_at_1m_m: None,
+            distortion: None,
         }
     }
 
@@ -188,6 +199,11 @@ impl CameraFile {
                     "must be finite",
                 ));
             }
+        }
+        if let Some(distortion) = &file.distortion {
+            distortion.validate().map_err(|e| {
+                DatasetError::invalid(format!("{}: [distortion]", path.display()), e.to_string())
+            })?;
         }
         if let Some(sigma) = file.depth_sigma_at_1m_m
             && !(sigma.is_finite() && sigma >= 0.0)

@@ -4,7 +4,7 @@ use std::path::{Path, PathBuf};
 
 use nalgebra::Isometry3;
 use scarp_export::tum::{StampedPose, read_tum_trajectory};
-use scarp_slam::image::register_color_to_depth;
+use scarp_slam::image::{Undistortion, register_color_to_depth};
 use scarp_slam::{PinholeCamera, RgbdFrame};
 
 use super::camera_file::CameraFile;
@@ -49,6 +49,9 @@ pub struct Sequence {
     pub entries: Vec<SequenceEntry>,
     /// `boxes.txt`, empty when absent.
     pub boxes: Vec<BoxRecord>,
+    /// The resampling into the pinhole camera when `camera.toml` has a `[distortion]` table
+    /// (computed once here, applied to every frame by [`Self::load_frame`]).
+    pub undistortion: Option<Undistortion>,
 }
 
 fn read_text(path: &Path) -> Result<String, DatasetError> {
@@ -106,6 +109,11 @@ impl Sequence {
     pub fn open_with_camera_file(dir: &Path, camera_toml: &Path) -> Result<Self, DatasetError> {
         let camera_file = CameraFile::read(camera_toml)?;
         let camera = camera_file.camera()?;
+        let undistortion = camera_file
+            .distortion
+            .map(|d| Undistortion::new(&camera, &d))
+            .transpose()
+            .map_err(|e| DatasetError::invalid(camera_toml.display().to_string(), e.to_string()))?;
         let rgb_list = parse_image_list(&read_text(&dir.join("rgb.txt"))?, &dir.join("rgb.txt"))?;
         let depth_list =
             parse_image_list(&read_text(&dir.join("depth.txt"))?, &dir.join("depth.txt"))?;
@@ -166,6 +174,7 @@ impl Sequence {
             camera,
             entries,
             boxes,
+            undistortion,
         })
     }
 
@@ -179,9 +188,10 @@ impl Sequence {
         self.entries.is_empty()
     }
 
-    /// Loads frame `index`: colour, depth (metres) and the mask when present. With a `[color]`
-    /// table in `camera.toml`, the colour is registered to the depth
-    /// ([`scarp_slam::image::register_color_to_depth`]), so the frame is always registered.
+    /// Loads frame `index`: colour, depth (metres) and the mask when present. With a
+    /// `[distortion]` table in `camera.toml`, the images are first resampled into the pinhole
+    /// camera ([`Self::undistortion`]). With a `[color]` table, the colour is registered to the
+    /// depth ([`scarp_slam::image::register_color_to_depth`]), so the frame is always registered.
     ///
     /// # Errors
     /// [`DatasetError::Invalid`] for an index out of range; image errors naming the file; a size
@@ -216,6 +226,10 @@ impl Sequence {
             (depth.width(), depth.height()),
             depth_size,
         )?;
+        let depth = match &self.undistortion {
+            Some(map) => map.depth(&depth)?,
+            None => depth,
+        };
         let rgb = match (&color_camera, &self.camera_file.color) {
             (Some(color_camera), Some(color)) => register_color_to_depth(
                 &rgb,
@@ -224,13 +238,19 @@ impl Sequence {
                 &self.camera,
                 &color.color_from_depth(),
             )?,
-            _ => rgb,
+            _ => match &self.undistortion {
+                Some(map) => map.rgb(&rgb)?,
+                None => rgb,
+            },
         };
         let mask = match &entry.mask_path {
             Some(path) => {
                 let mask = read_mask_png(path)?;
                 check(path, (mask.width(), mask.height()), depth_size)?;
-                Some(mask)
+                Some(match &self.undistortion {
+                    Some(map) => map.mask(&mask)?,
+                    None => mask,
+                })
             }
             None => None,
         };

@@ -5,7 +5,9 @@
 mod buffer;
 mod pyramid;
 mod registration;
+mod undistortion;
 
 pub use buffer::{DepthImage, GrayImage, Image, MaskImage, RgbImage};
 pub use pyramid::{ImagePyramid, downsample_depth, downsample_gray, gray_from_rgb};
 pub use registration::register_color_to_depth;
+pub use undistortion::{LensDistortion, Undistortion};

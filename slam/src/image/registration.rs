@@ -61,7 +61,7 @@ pub fn register_color_to_depth(
 }
 
 /// Bilinear colour at (u, v), with coordinates clamped to the image.
-fn sample_rgb_clamped(rgb: &RgbImage, u: f64, v: f64) -> [u8; 3] {
+pub(super) fn sample_rgb_clamped(rgb: &RgbImage, u: f64, v: f64) -> [u8; 3] {
     let max_u = f64::from(rgb.width() - 1);
     let max_v = f64::from(rgb.height() - 1);
     let (u, v) = (u.clamp(0.0, max_u), v.clamp(0.0, max_v));
