@@ -49,7 +49,7 @@ use scarp_slam::TriangleMesh;
 use scarp_slam::keyframes::KeyframeConfig;
 use scarp_slam::mapping::{
     KeyframeSet, ModelTracker, ModelTrackingConfig, RefineConfig, TrackingReferenceKind,
-    refine_keyframes, reprojection_stats,
+    odometry_nees, refine_keyframes, reprojection_stats,
 };
 use scarp_slam::meshing::{MeshingConfig, extract_mesh, remove_small_components};
 use scarp_slam::tsdf::{Roi, TsdfConfig, TsdfVolume};
@@ -287,6 +287,10 @@ struct StoredKeyframes {
     odometry: Vec<StampedPose>,
 }
 
+/// The median of a χ² distribution with 6 degrees of freedom (a 6-DoF pose error whitened by
+/// its true covariance).
+const CHI2_6_MEDIAN: f64 = 5.348;
+
 /// Runs [`refine_keyframes`] and adds its figures (and, with ground truth, the before/after
 /// ATE and F-scores) to `extra`; returns the mesh of every frame fused at its corrected pose
 /// and its meshing time (ms).
@@ -342,6 +346,10 @@ fn refine(
     extra.insert("ba_final_cost".into(), refined.ba.final_cost.into());
     extra.insert("ba_iterations".into(), refined.ba.iterations.into());
     extra.insert("ba_costs".into(), refined.ba.costs.clone().into());
+    extra.insert(
+        "ba_estimated_noise".into(),
+        serde_json::to_value(refined.estimated_noise)?,
+    );
     extra.insert("landmarks_ms".into(), refined.landmarks_ms.into());
     extra.insert("ba_ms".into(), refined.ba_ms.into());
     extra.insert("reintegrate_ms".into(), refined.reintegrate_ms.into());
@@ -362,6 +370,29 @@ fn refine(
             "ate_rmse_after_ba_m".into(),
             ate(&refined.world_from_camera).into(),
         );
+        // The odometry's keyframe-to-keyframe errors in units of its own covariance: a
+        // median of 5.35 (χ² with 6 degrees of freedom) means the covariance is calibrated.
+        let mut nees: Vec<f64> = odometry_nees(
+            &keyframes.set.world_from_camera_odometry,
+            truth,
+            &keyframes.set.odometry_covariance,
+        )
+        .into_iter()
+        .flatten()
+        .collect();
+        nees.sort_by(f64::total_cmp);
+        if !nees.is_empty() {
+            let median = percentile(&nees, 0.5);
+            extra.insert("odometry_nees_median".into(), median.into());
+            extra.insert(
+                "odometry_nees_mean".into(),
+                (nees.iter().sum::<f64>() / nees.len() as f64).into(),
+            );
+            extra.insert(
+                "odometry_information_scale_calibrated".into(),
+                (CHI2_6_MEDIAN / median).into(),
+            );
+        }
         // The landmark observations re-triangulated with the true poses: their own noise and
         // bias, whatever the odometry and the adjustment did.
         let residuals = reprojection_stats(&seq.camera, truth, &refined.tracks);

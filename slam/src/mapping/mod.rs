@@ -24,8 +24,10 @@ use crate::odometry::OdometryError;
 use crate::tsdf::TsdfError;
 
 pub use landmarks::{LandmarkConfig, LandmarkView, Landmarks, track_landmarks};
-pub use refine::{BetweenFrame, KeyframeSet, RefineConfig, RefinedMap, refine_keyframes};
-pub use residuals::{ReprojectionStats, reprojection_stats, triangulate_point};
+pub use refine::{
+    BetweenFrame, EstimatedNoise, KeyframeSet, RefineConfig, RefinedMap, refine_keyframes,
+};
+pub use residuals::{ReprojectionStats, odometry_nees, reprojection_stats, triangulate_point};
 pub use tracker::{ModelTracker, ModelTrackingConfig, TrackedFrame, TrackingReferenceKind};
 
 /// An error of the mapping pipeline.

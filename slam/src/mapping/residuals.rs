@@ -4,8 +4,11 @@
 //! Against the true poses of a synthetic sequence this measures the observations themselves
 //! (KLT noise and bias), independently of the odometry and of the bundle adjustment; against
 //! the refined poses it is the adjustment's own fit.
+//!
+//! [`odometry_nees`] asks the same of the odometry's covariances: how large its keyframe-to-
+//! keyframe errors are against the true poses, in units of the σ it claims.
 
-use nalgebra::{Isometry3, Matrix3, Point2, Point3, Vector2, Vector3};
+use nalgebra::{Isometry3, Matrix3, Matrix6, Point2, Point3, Vector2, Vector3, Vector6};
 use serde::{Deserialize, Serialize};
 
 use super::landmarks::Landmarks;
@@ -28,6 +31,39 @@ pub struct ReprojectionStats {
     pub p90_px: f64,
     /// Mean number of observations per landmark.
     pub mean_track_length: f64,
+}
+
+/// The normalized estimation error squared of every consecutive keyframe motion the odometry
+/// measured: e^T Σ^-1 e, with e the right perturbation (translation m, rotation rad) that takes
+/// the true `camera_{k-1}_from_camera_k` to the odometry's, and Σ the odometry's covariance of
+/// it (`covariance[k]`, as [`super::KeyframeSet::odometry_covariance`]). Entry k - 1 of the
+/// result is keyframe k's; pairs without a covariance, or with one that is not invertible, give
+/// `None`.
+///
+/// A calibrated covariance gives a mean of 6 (the degrees of freedom); a mean of 60 says the
+/// odometry claims ten times the information it has, which is what
+/// [`super::RefineConfig::odometry_information_scale`] corrects.
+///
+/// # Panics
+/// Never; lists of different lengths are read up to the shortest.
+pub fn odometry_nees(
+    odometry: &[Isometry3<f64>],
+    truth: &[Isometry3<f64>],
+    covariance: &[Option<Matrix6<f64>>],
+) -> Vec<Option<f64>> {
+    let n = odometry.len().min(truth.len()).min(covariance.len());
+    (1..n)
+        .map(|k| {
+            let information = covariance[k]?.try_inverse()?;
+            let measured = odometry[k - 1].inverse() * odometry[k];
+            let true_motion = truth[k - 1].inverse() * truth[k];
+            let error = true_motion.inverse() * measured;
+            let (t, r) = (error.translation.vector, error.rotation.scaled_axis());
+            let e = Vector6::new(t.x, t.y, t.z, r.x, r.y, r.z);
+            let nees = (e.transpose() * information * e)[(0, 0)];
+            nees.is_finite().then_some(nees)
+        })
+        .collect()
 }
 
 /// Gauss–Newton on a 3D point (world metres) that minimises the residuals of `observations`
@@ -156,6 +192,53 @@ fn summarise(landmarks: usize, mut residuals: Vec<f64>) -> ReprojectionStats {
 mod tests {
     use super::*;
     use crate::geometry::look_at;
+
+    /// Motions wrong by exactly what their covariance claims give a median NEES near χ²₆'s
+    /// (5.35); the same errors under a covariance claiming 10× the information give 10× that.
+    #[test]
+    fn the_odometrys_nees_measures_its_covariance() {
+        use rand::{RngExt, SeedableRng};
+        let mut rng = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(3);
+        let mut normal = || {
+            let u: f64 = rng.random_range(1e-12..1.0);
+            let v: f64 = rng.random_range(0.0..1.0);
+            (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
+        };
+        let sigma = Vector6::new(0.002, 0.001, 0.003, 0.001, 0.002, 0.0005);
+        let covariance = Matrix6::from_diagonal(&sigma.component_mul(&sigma));
+        let mut truth = vec![Isometry3::identity()];
+        let mut odometry = vec![Isometry3::identity()];
+        for k in 1..801usize {
+            let step = Isometry3::new(
+                Vector3::new(0.3, 0.02 * (k % 3) as f64, 0.0),
+                Vector3::new(0.0, 0.0, 0.05),
+            );
+            let e = Vector6::from_fn(|i, _| sigma[i] * normal());
+            let error = Isometry3::new(
+                Vector3::new(e[0], e[1], e[2]),
+                Vector3::new(e[3], e[4], e[5]),
+            );
+            truth.push(truth[k - 1] * step);
+            odometry.push(odometry[k - 1] * step * error);
+        }
+        let median = |covariance: Matrix6<f64>| {
+            let mut nees: Vec<f64> = odometry_nees(&odometry, &truth, &vec![Some(covariance); 801])
+                .into_iter()
+                .map(Option::unwrap)
+                .collect();
+            nees.sort_by(f64::total_cmp);
+            nees[nees.len() / 2]
+        };
+        let calibrated = median(covariance);
+        assert!((4.6..6.2).contains(&calibrated), "median NEES {calibrated}");
+        let overconfident = median(covariance * 0.1);
+        assert!((overconfident / calibrated - 10.0).abs() < 1e-6);
+        // A pair without a covariance has no NEES.
+        assert_eq!(
+            odometry_nees(&odometry[..2], &truth[..2], &[None, None]),
+            vec![None]
+        );
+    }
 
     #[test]
     fn exact_observations_have_zero_residual_and_noisy_ones_do_not() {
