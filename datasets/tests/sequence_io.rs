@@ -289,15 +289,11 @@ fn a_distorted_sequence_loads_as_its_pinhole_images() {
     let (mut depth, mut rgb) = (Vec::new(), Vec::new());
     for v in 0..camera.height {
         for u in 0..camera.width {
-            // The ideal point the lens images at (u, v), by fixed-point iteration.
-            let xd = (f64::from(u) - camera.cx) / camera.fx;
-            let yd = (f64::from(v) - camera.cy) / camera.fy;
-            let (mut x, mut y) = (xd, yd);
-            for _ in 0..60 {
-                let (dx, dy) = lens.distort(x, y);
-                x -= dx - xd;
-                y -= dy - yd;
-            }
+            // The ideal point the lens images at (u, v).
+            let (x, y) = lens.undistort(
+                (f64::from(u) - camera.cx) / camera.fx,
+                (f64::from(v) - camera.cy) / camera.fy,
+            );
             let (ideal_u, ideal_v) = (camera.fx * x + camera.cx, camera.fy * y + camera.cy);
             depth.push(depth_at(ideal_u) as f32);
             rgb.push([ideal_u.round() as u8, ideal_v.round() as u8, 0]);

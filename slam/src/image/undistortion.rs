@@ -48,6 +48,20 @@ impl LensDistortion {
         )
     }
 
+    /// The ideal normalized point that the lens images at `(x_d, y_d)`: [`Self::distort`]
+    /// inverted by fixed-point iteration (50 steps). It converges wherever the lens maps the
+    /// image one to one, which covers the field of view of a calibrated camera; beyond it (far
+    /// outside the image) the result is meaningless.
+    pub fn undistort(&self, x_d: f64, y_d: f64) -> (f64, f64) {
+        let (mut x, mut y) = (x_d, y_d);
+        for _ in 0..50 {
+            let (dx, dy) = self.distort(x, y);
+            x -= dx - x_d;
+            y -= dy - y_d;
+        }
+        (x, y)
+    }
+
     /// Checks that every coefficient is finite.
     ///
     /// # Errors
@@ -219,20 +233,16 @@ mod tests {
     #[test]
     fn undistortion_inverts_the_lens() {
         let camera = freiburg1_camera();
-        // Render the distorted image by inverting the lens numerically per distorted pixel: the
-        // ideal point (x, y) whose distortion lands on it, found by fixed-point iteration.
+        // Render the distorted image: each distorted pixel shows the ideal point the lens puts
+        // there.
         let (w, h) = (camera.width, camera.height);
         let mut distorted = vec![0.0f32; (w * h) as usize];
         for v in 0..h {
             for u in 0..w {
-                let xd = (f64::from(u) - camera.cx) / camera.fx;
-                let yd = (f64::from(v) - camera.cy) / camera.fy;
-                let (mut x, mut y) = (xd, yd);
-                for _ in 0..50 {
-                    let (fx, fy) = FREIBURG1.distort(x, y);
-                    x -= fx - xd;
-                    y -= fy - yd;
-                }
+                let (x, y) = FREIBURG1.undistort(
+                    (f64::from(u) - camera.cx) / camera.fx,
+                    (f64::from(v) - camera.cy) / camera.fy,
+                );
                 // Encode the ideal pixel (column, row) in one float: column + 1000·row.
                 let ideal_u = camera.fx * x + camera.cx;
                 let ideal_v = camera.fy * y + camera.cy;
@@ -268,6 +278,15 @@ mod tests {
         let centre = map.source_px[(255 * w + 318) as usize].unwrap();
         assert!((centre.x - 318.0).abs() < 0.5 && (centre.y - 255.0).abs() < 0.5);
         assert!(corner.x.is_nan() || corner.x.abs() > 5.0 || corner.y.abs() > 5.0);
+    }
+
+    #[test]
+    fn undistort_inverts_distort() {
+        for (x, y) in [(0.0, 0.0), (0.3, -0.2), (-0.55, 0.4), (0.6, 0.45)] {
+            let (xd, yd) = FREIBURG1.distort(x, y);
+            let (xu, yu) = FREIBURG1.undistort(xd, yd);
+            assert!((xu - x).abs() < 1e-9 && (yu - y).abs() < 1e-9, "({x}, {y})");
+        }
     }
 
     #[test]

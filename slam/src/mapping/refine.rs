@@ -345,13 +345,19 @@ pub fn refine_keyframes(
     let mut model = model_with(noise, odometry_scale)?;
     let mut poses = keyframes.world_from_camera_odometry.clone();
     let mut points = landmarks.points.clone();
-    let mut ba = solve(
-        &model,
-        &mut poses,
-        &mut points,
-        &landmarks.observations,
-        &config.solver,
-    )?;
+    let solve_from = |model: &KeyframeModel,
+                      poses: &mut Vec<Isometry3<f64>>,
+                      points: &mut Vec<Vector3<f64>>,
+                      landmarks: &Landmarks| {
+        solve(
+            model,
+            poses,
+            points,
+            &landmarks.observations,
+            &config.solver,
+        )
+    };
+    let mut ba = solve_from(&model, &mut poses, &mut points, &landmarks)?;
     let mut threshold_px = config.reject_residual_px;
     let mut estimated_noise = None;
     let rounds = if config.estimate_noise {
@@ -398,13 +404,7 @@ pub fn refine_keyframes(
             break;
         }
         let first = ba;
-        ba = solve(
-            &model,
-            &mut poses,
-            &mut points,
-            &landmarks.observations,
-            &config.solver,
-        )?;
+        ba = solve_from(&model, &mut poses, &mut points, &landmarks)?;
         // One report for every solve: the earlier solves' costs come first.
         let mut costs = first.costs;
         costs.extend(ba.costs.iter().copied());
