@@ -1,6 +1,7 @@
 //! Opening a sequence and loading its frames.
 
 use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
 
 use nalgebra::Isometry3;
 use scarp_export::tum::{StampedPose, read_tum_trajectory};
@@ -49,9 +50,10 @@ pub struct Sequence {
     pub entries: Vec<SequenceEntry>,
     /// `boxes.txt`, empty when absent.
     pub boxes: Vec<BoxRecord>,
-    /// The resampling into the pinhole camera when `camera.toml` has a `[distortion]` table
-    /// (computed once here, applied to every frame by [`Self::load_frame`]).
-    pub undistortion: Option<Undistortion>,
+    /// The resampling into the pinhole camera when `camera.toml` has a `[distortion]` table,
+    /// built by the first [`Self::load_frame`] (after that frame's size matched `camera.toml`,
+    /// so a corrupt size cannot make it allocate) and reused by every later one.
+    undistortion: OnceLock<Undistortion>,
 }
 
 fn read_text(path: &Path) -> Result<String, DatasetError> {
@@ -109,11 +111,6 @@ impl Sequence {
     pub fn open_with_camera_file(dir: &Path, camera_toml: &Path) -> Result<Self, DatasetError> {
         let camera_file = CameraFile::read(camera_toml)?;
         let camera = camera_file.camera()?;
-        let undistortion = camera_file
-            .distortion
-            .map(|d| Undistortion::new(&camera, &d))
-            .transpose()
-            .map_err(|e| DatasetError::invalid(camera_toml.display().to_string(), e.to_string()))?;
         let rgb_list = parse_image_list(&read_text(&dir.join("rgb.txt"))?, &dir.join("rgb.txt"))?;
         let depth_list =
             parse_image_list(&read_text(&dir.join("depth.txt"))?, &dir.join("depth.txt"))?;
@@ -174,7 +171,7 @@ impl Sequence {
             camera,
             entries,
             boxes,
-            undistortion,
+            undistortion: OnceLock::new(),
         })
     }
 
@@ -190,7 +187,7 @@ impl Sequence {
 
     /// Loads frame `index`: colour, depth (metres) and the mask when present. With a
     /// `[distortion]` table in `camera.toml`, the images are first resampled into the pinhole
-    /// camera ([`Self::undistortion`]). With a `[color]` table, the colour is registered to the
+    /// camera ([`scarp_slam::image::Undistortion`]). With a `[color]` table, the colour is registered to the
     /// depth ([`scarp_slam::image::register_color_to_depth`]), so the frame is always registered.
     ///
     /// # Errors
@@ -226,7 +223,17 @@ impl Sequence {
             (depth.width(), depth.height()),
             depth_size,
         )?;
-        let depth = match &self.undistortion {
+        let undistortion = match &self.camera_file.distortion {
+            Some(distortion) => Some(match self.undistortion.get() {
+                Some(map) => map,
+                None => {
+                    let map = Undistortion::new(&self.camera, distortion)?;
+                    self.undistortion.get_or_init(|| map)
+                }
+            }),
+            None => None,
+        };
+        let depth = match undistortion {
             Some(map) => map.depth(&depth)?,
             None => depth,
         };
@@ -238,7 +245,7 @@ impl Sequence {
                 &self.camera,
                 &color.color_from_depth(),
             )?,
-            _ => match &self.undistortion {
+            _ => match undistortion {
                 Some(map) => map.rgb(&rgb)?,
                 None => rgb,
             },
@@ -247,7 +254,7 @@ impl Sequence {
             Some(path) => {
                 let mask = read_mask_png(path)?;
                 check(path, (mask.width(), mask.height()), depth_size)?;
-                Some(match &self.undistortion {
+                Some(match undistortion {
                     Some(map) => map.mask(&mask)?,
                     None => mask,
                 })
