@@ -900,7 +900,8 @@ impl<'a> Mission<'a> {
             self.set_mode(Mode::Done);
             return Ok(());
         }
-        // Climb back to the search altitude first, straight up, so the way back is clear.
+        // Climb back to the search altitude first, straight up and from rest, so the way back
+        // is clear: the vehicle may still carry its ring speed, beside the rock.
         let here = self.sensors.vehicle().current_waypoint();
         let mut climb = here;
         climb.position_m.z = self.search.altitude_m;
@@ -908,7 +909,7 @@ impl<'a> Mission<'a> {
         waypoints.extend(path);
         self.sensors
             .vehicle_mut()
-            .follow(&waypoints, &self.env, &config.planning)?;
+            .follow_from_rest(&waypoints, &self.env, &config.planning)?;
         timings.planning_s += clock.elapsed().as_secs_f64();
         self.set_mode(Mode::Search);
         Ok(())
