@@ -59,8 +59,9 @@ pub struct RefineConfig {
     ///
     /// Default false. It helps where the residuals' scatter is the noise, as with the
     /// simulated sensor: on 120-frame noisy orbits of the three worlds (seeds 0 and 1) the
-    /// keyframe ATE after BA went from 1.08–1.63 to 1.01–1.44 mm, never worse, and the
-    /// mission turns it on (`[mapping.refine]`). On real sensors the landmarks' errors are
+    /// keyframe ATE after BA went from 1.08–1.63 to 1.01–1.44 mm, never worse, and over a
+    /// 33-target mission campaign its median from 1.39 to 1.19 mm (see the mission's
+    /// `[mapping.refine]` for why the mission keeps it off for now). On real sensors the landmarks' errors are
     /// systematic (a rolling shutter, colour calibrated to depth by nominal intrinsics), which
     /// a scatter cannot show: it trusted the landmarks more and raised the ATE on 7-Scenes
     /// (keyframes 4.55 → 4.96 mm) and on TUM freiburg1_rpy (45.8 → 47.7 mm, motion-capture
