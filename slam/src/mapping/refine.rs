@@ -61,11 +61,11 @@ pub struct RefineConfig {
     /// simulated sensor: on 120-frame noisy orbits of the three worlds (seeds 0 and 1) the
     /// keyframe ATE after BA went from 1.08–1.63 to 1.01–1.44 mm, never worse, and over a
     /// 33-target mission campaign its median from 1.39 to 1.19 mm (see the mission's
-    /// `[mapping.refine]` for why the mission keeps it off for now). On real sensors the landmarks' errors are
-    /// systematic (a rolling shutter, colour calibrated to depth by nominal intrinsics), which
-    /// a scatter cannot show: it trusted the landmarks more and raised the ATE on 7-Scenes
-    /// (keyframes 4.55 → 4.96 mm) and on TUM freiburg1_rpy (45.8 → 47.7 mm, motion-capture
-    /// truth).
+    /// `[mapping.refine]` for why the mission keeps it off for now). On real sensors the
+    /// landmarks' errors are systematic (a rolling shutter, colour calibrated to depth by
+    /// nominal intrinsics), which a scatter cannot show: it trusted the landmarks more and
+    /// raised the ATE on 7-Scenes (keyframes 4.55 → 4.96 mm) and on TUM freiburg1_rpy
+    /// (45.8 → 47.7 mm, motion-capture truth).
     pub estimate_noise: bool,
     /// Use the measured depth at each landmark observation as a residual. Default true. Turn it
     /// off for a sensor whose depth is not registered to its colour image: the depth read at a
