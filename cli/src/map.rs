@@ -48,8 +48,8 @@ use scarp_export::tum::{StampedPose, write_tum_trajectory};
 use scarp_slam::TriangleMesh;
 use scarp_slam::keyframes::KeyframeConfig;
 use scarp_slam::mapping::{
-    KeyframeSet, ModelTracker, ModelTrackingConfig, RefineConfig, TrackingReferenceKind,
-    odometry_nees, refine_keyframes, reprojection_stats,
+    CHI2_6_MEDIAN, KeyframeSet, ModelTracker, ModelTrackingConfig, RefineConfig,
+    TrackingReferenceKind, odometry_nees, refine_keyframes, reprojection_stats,
 };
 use scarp_slam::meshing::{MeshingConfig, extract_mesh, remove_small_components};
 use scarp_slam::tsdf::{Roi, TsdfConfig, TsdfVolume};
@@ -286,10 +286,6 @@ struct StoredKeyframes {
     /// Every frame's odometry pose (filled in after tracking).
     odometry: Vec<StampedPose>,
 }
-
-/// The median of a χ² distribution with 6 degrees of freedom (a 6-DoF pose error whitened by
-/// its true covariance).
-const CHI2_6_MEDIAN: f64 = 5.348;
 
 /// Runs [`refine_keyframes`] and adds its figures (and, with ground truth, the before/after
 /// ATE and F-scores) to `extra`; returns the mesh of every frame fused at its corrected pose

@@ -280,6 +280,19 @@ mod tests {
         assert!((p - (start - drift)).norm() < 0.05, "settled at {p}");
     }
 
+    /// A vehicle halfway along a 60 m leg along +x at 10 m, at cruise speed.
+    fn cruising_along_x(planning: &PlanningConfig) -> MotionSystem {
+        let mut motion =
+            MotionSystem::new(&planning.flight, Point3::new(0.0, 0.0, 10.0), 0.0).unwrap();
+        let far = Waypoint::new(Point3::new(60.0, 0.0, 10.0), 0.0);
+        motion
+            .follow(&[far], &Environment::empty(), planning)
+            .unwrap();
+        let cruise_s = 0.5 * motion.remaining_s();
+        motion.advance_to(cruise_s, &Vector3::zeros()).unwrap();
+        motion
+    }
+
     #[test]
     fn a_way_out_that_momentum_would_swing_into_a_wall_is_flown_from_rest() {
         // Cruising along +x, told to climb straight up: a smooth climb from that speed carries
@@ -288,14 +301,7 @@ mod tests {
         // (as on a leg too short to split), the vehicle brakes and climbs from rest.
         let mut planning = PlanningConfig::default();
         planning.clearance.max_inserted_waypoints = 0;
-        let mut motion =
-            MotionSystem::new(&planning.flight, Point3::new(0.0, 0.0, 10.0), 0.0).unwrap();
-        let far = Waypoint::new(Point3::new(60.0, 0.0, 10.0), 0.0);
-        motion
-            .follow(&[far], &Environment::empty(), &planning)
-            .unwrap();
-        let cruise_s = 0.5 * motion.remaining_s();
-        motion.advance_to(cruise_s, &Vector3::zeros()).unwrap();
+        let mut motion = cruising_along_x(&planning);
         let here = motion.state().position_m;
         let moving = StartState {
             velocity_mps: motion.state().velocity_mps,
@@ -349,14 +355,7 @@ mod tests {
     fn leaving_from_rest_climbs_straight_whatever_the_speed() {
         let planning = PlanningConfig::default();
         let cruise = |from_rest: bool| {
-            let mut motion =
-                MotionSystem::new(&planning.flight, Point3::new(0.0, 0.0, 10.0), 0.0).unwrap();
-            let far = Waypoint::new(Point3::new(60.0, 0.0, 10.0), 0.0);
-            motion
-                .follow(&[far], &Environment::empty(), &planning)
-                .unwrap();
-            let cruise_s = 0.5 * motion.remaining_s();
-            motion.advance_to(cruise_s, &Vector3::zeros()).unwrap();
+            let mut motion = cruising_along_x(&planning);
             let speed = motion.state().velocity_mps.norm();
             let here = motion.current_waypoint().position_m;
             let up = Waypoint::new(Point3::new(here.x, here.y, 25.0), 0.0);

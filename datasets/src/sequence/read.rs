@@ -185,10 +185,24 @@ impl Sequence {
         self.entries.is_empty()
     }
 
+    /// The map into the pinhole camera when `camera.toml` has a `[distortion]` table, built on
+    /// the first call and kept.
+    fn undistortion(&self) -> Result<Option<&Undistortion>, DatasetError> {
+        let Some(distortion) = &self.camera_file.distortion else {
+            return Ok(None);
+        };
+        if let Some(map) = self.undistortion.get() {
+            return Ok(Some(map));
+        }
+        let map = Undistortion::new(&self.camera, distortion)?;
+        Ok(Some(self.undistortion.get_or_init(|| map)))
+    }
+
     /// Loads frame `index`: colour, depth (metres) and the mask when present. With a
     /// `[distortion]` table in `camera.toml`, the images are first resampled into the pinhole
-    /// camera ([`scarp_slam::image::Undistortion`]). With a `[color]` table, the colour is registered to the
-    /// depth ([`scarp_slam::image::register_color_to_depth`]), so the frame is always registered.
+    /// camera ([`scarp_slam::image::Undistortion`]). With a `[color]` table, the colour is
+    /// registered to the depth ([`scarp_slam::image::register_color_to_depth`]), so the frame
+    /// is always registered.
     ///
     /// # Errors
     /// [`DatasetError::Invalid`] for an index out of range; image errors naming the file; a size
@@ -223,16 +237,7 @@ impl Sequence {
             (depth.width(), depth.height()),
             depth_size,
         )?;
-        let undistortion = match &self.camera_file.distortion {
-            Some(distortion) => Some(match self.undistortion.get() {
-                Some(map) => map,
-                None => {
-                    let map = Undistortion::new(&self.camera, distortion)?;
-                    self.undistortion.get_or_init(|| map)
-                }
-            }),
-            None => None,
-        };
+        let undistortion = self.undistortion()?;
         let depth = match undistortion {
             Some(map) => map.depth(&depth)?,
             None => depth,

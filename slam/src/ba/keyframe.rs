@@ -129,8 +129,9 @@ fn right_jacobian_inverse(theta: &Vector3<f64>) -> Matrix3<f64> {
     Matrix3::identity() + k * 0.5 + k * k * coefficient
 }
 
-/// The error (t_E, log R_E) of E = measured⁻¹·estimate.
-fn pose_error(measured: &Isometry3<f64>, estimate: &Isometry3<f64>) -> SVector<f64, 6> {
+/// The error (t_E, log R_E) of E = measured⁻¹·estimate: the right perturbation (translation m,
+/// rotation rad) that takes `measured` to `estimate`, as the pose priors whiten it.
+pub(crate) fn pose_error(measured: &Isometry3<f64>, estimate: &Isometry3<f64>) -> SVector<f64, 6> {
     let e = measured.inverse() * estimate;
     let mut out = SVector::<f64, 6>::zeros();
     out.fixed_rows_mut::<3>(0).copy_from(&e.translation.vector);

@@ -98,8 +98,8 @@ pub struct LandmarkConfig {
     /// the search took 64 s, and 20 s with 25 misses for the same observations (36 334 and
     /// 36 646; every-frame ATE after BA 45.8 and 46.3 mm, odometry 46.3 mm). Fewer misses are
     /// faster still (10: 12 s; 3: 6 s), but the ATE after BA rose to 47.4 and 50.3 mm, and
-    /// 3 dropped 4% of the observations. With a ROI the camera circles its
-    /// target and returns to its landmarks, so every track stays.
+    /// 3 dropped 4% of the observations. With a ROI the camera circles its target and returns
+    /// to its landmarks, so every track stays.
     pub whole_frame_max_misses: Option<u32>,
 }
 
@@ -185,11 +185,7 @@ pub fn track_landmarks(
     let poses: Vec<Isometry3<f64>> = views.iter().map(|v| *v.world_from_camera).collect();
     let mut pyramids: Vec<KltPyramid> = Vec::with_capacity(views.len());
     let mut tracks: Vec<Track> = Vec::new();
-    let max_misses = if roi.is_none() {
-        config.whole_frame_max_misses
-    } else {
-        None
-    };
+    let max_misses = config.whole_frame_max_misses.filter(|_| roi.is_none());
     for (k, view) in views.iter().enumerate() {
         let pyramid = KltPyramid::new(view.gray, config.klt.pyramid_levels);
         // Tracks are created keyframe by keyframe, so their anchors never decrease and one

@@ -27,7 +27,9 @@ pub use landmarks::{LandmarkConfig, LandmarkView, Landmarks, track_landmarks};
 pub use refine::{
     BetweenFrame, EstimatedNoise, KeyframeSet, RefineConfig, RefinedMap, refine_keyframes,
 };
-pub use residuals::{ReprojectionStats, odometry_nees, reprojection_stats, triangulate_point};
+pub use residuals::{
+    CHI2_6_MEDIAN, ReprojectionStats, odometry_nees, reprojection_stats, triangulate_point,
+};
 pub use tracker::{ModelTracker, ModelTrackingConfig, TrackedFrame, TrackingReferenceKind};
 
 /// An error of the mapping pipeline.

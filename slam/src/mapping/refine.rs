@@ -20,6 +20,8 @@ use serde::{Deserialize, Serialize};
 
 use super::MappingError;
 use super::landmarks::{LandmarkConfig, LandmarkView, Landmarks, track_landmarks};
+use super::residuals::CHI2_6_MEDIAN;
+use crate::ba::keyframe::pose_error;
 use crate::ba::{
     AbsolutePosePrior, BaSummary, KeyframeModel, KeyframeNoise, KeyframeObservation, LmConfig,
     RelativePosePrior, RobustLoss, solve,
@@ -465,9 +467,6 @@ const NOISE_ROUNDS: usize = 2;
 /// Outliers are observations beyond this many estimated pixel σ.
 const REJECT_SIGMAS: f64 = 5.0;
 
-/// The median of a χ² distribution with 6 degrees of freedom.
-const CHI2_6_MEDIAN: f64 = 5.348;
-
 /// Fewest residuals of a landmark group whose σ is estimated; a smaller group keeps its weight.
 const MIN_NOISE_SAMPLES: usize = 30;
 
@@ -545,26 +544,18 @@ fn estimate_noise(
     let mut whitened: Vec<f64> = relative
         .iter()
         .filter_map(|prior| {
-            let measured = prior.camera_a_from_camera_b;
             let estimate = poses.get(prior.camera_a)?.inverse() * poses.get(prior.camera_b)?;
-            let error = measured.inverse() * estimate;
-            let (t, r) = (error.translation.vector, error.rotation.scaled_axis());
-            let e = nalgebra::Vector6::new(t.x, t.y, t.z, r.x, r.y, r.z);
+            let e = pose_error(&prior.camera_a_from_camera_b, &estimate);
             Some((e.transpose() * prior.information * e)[(0, 0)])
         })
         .filter(|w| w.is_finite())
         .collect();
     whitened.sort_by(f64::total_cmp);
-    let odometry_variance_factor = if whitened.len() >= MIN_ODOMETRY_PRIORS {
-        let factor = crate::stats::percentile_sorted(&whitened, 0.5) / CHI2_6_MEDIAN;
-        if factor.is_finite() && factor > 0.0 {
-            factor
-        } else {
-            1.0
-        }
-    } else {
-        1.0
-    };
+    let odometry_variance_factor = Some(whitened.len())
+        .filter(|&n| n >= MIN_ODOMETRY_PRIORS)
+        .map(|_| crate::stats::percentile_sorted(&whitened, 0.5) / CHI2_6_MEDIAN)
+        .filter(|f| f.is_finite() && *f > 0.0)
+        .unwrap_or(1.0);
     Some(NoiseEstimate {
         pixel_sigma_px,
         depth_sigma_m,
@@ -696,12 +687,10 @@ mod tests {
         )
     }
 
-    /// A standard normal draw (Box–Muller), deterministic for a seeded generator.
+    /// A standard normal draw, deterministic for a seeded generator.
     fn normal(rng: &mut rand::rngs::Xoshiro256PlusPlus) -> f64 {
-        use rand::RngExt;
-        let u: f64 = rng.random_range(1e-12..1.0);
-        let v: f64 = rng.random_range(0.0..1.0);
-        (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
+        use rand_distr::Distribution;
+        rand_distr::StandardNormal.sample(rng)
     }
 
     /// Observations with a known pixel and depth noise, and odometry priors whose errors are

@@ -8,11 +8,12 @@
 //! [`odometry_nees`] asks the same of the odometry's covariances: how large its keyframe-to-
 //! keyframe errors are against the true poses, in units of the σ it claims.
 
-use nalgebra::{Isometry3, Matrix3, Matrix6, Point2, Point3, Vector2, Vector3, Vector6};
+use nalgebra::{Isometry3, Matrix3, Matrix6, Point2, Point3, Vector2, Vector3};
 use serde::{Deserialize, Serialize};
 
 use super::landmarks::Landmarks;
 use crate::PinholeCamera;
+use crate::ba::keyframe::pose_error;
 use crate::ba::{KeyframeNoise, KeyframeObservation};
 
 /// Summary of [`reprojection_stats`]. Pixels throughout.
@@ -32,6 +33,10 @@ pub struct ReprojectionStats {
     /// Mean number of observations per landmark.
     pub mean_track_length: f64,
 }
+
+/// The median of a χ² distribution with 6 degrees of freedom: the median NEES of a 6-DoF pose
+/// error whose covariance is calibrated.
+pub const CHI2_6_MEDIAN: f64 = 5.348;
 
 /// The normalized estimation error squared of every consecutive keyframe motion the odometry
 /// measured: e^T Σ^-1 e, with e the right perturbation (translation m, rotation rad) that takes
@@ -57,9 +62,7 @@ pub fn odometry_nees(
             let information = covariance[k]?.try_inverse()?;
             let measured = odometry[k - 1].inverse() * odometry[k];
             let true_motion = truth[k - 1].inverse() * truth[k];
-            let error = true_motion.inverse() * measured;
-            let (t, r) = (error.translation.vector, error.rotation.scaled_axis());
-            let e = Vector6::new(t.x, t.y, t.z, r.x, r.y, r.z);
+            let e = pose_error(&true_motion, &measured);
             let nees = (e.transpose() * information * e)[(0, 0)];
             nees.is_finite().then_some(nees)
         })
@@ -197,13 +200,11 @@ mod tests {
     /// (5.35); the same errors under a covariance claiming 10× the information give 10× that.
     #[test]
     fn the_odometrys_nees_measures_its_covariance() {
-        use rand::{RngExt, SeedableRng};
+        use nalgebra::Vector6;
+        use rand::SeedableRng;
+        use rand_distr::{Distribution, StandardNormal};
         let mut rng = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(3);
-        let mut normal = || {
-            let u: f64 = rng.random_range(1e-12..1.0);
-            let v: f64 = rng.random_range(0.0..1.0);
-            (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
-        };
+        let mut normal = || -> f64 { StandardNormal.sample(&mut rng) };
         let sigma = Vector6::new(0.002, 0.001, 0.003, 0.001, 0.002, 0.0005);
         let covariance = Matrix6::from_diagonal(&sigma.component_mul(&sigma));
         let mut truth = vec![Isometry3::identity()];
