@@ -359,39 +359,6 @@ impl Environment {
         Ok(Self { terrain, obstacles })
     }
 
-    /// This environment with obstacle `index` replaced by `with`, for each pair of
-    /// `replacements`; every other obstacle keeps its index, so a report's
-    /// [`ClearanceSource::Obstacle`] still names the same obstacle.
-    ///
-    /// Why: a target is known to the planner twice, as its mesh in the prior map (world frame)
-    /// and as its localized cylinder (the frame the vehicle flies in). Planned around the mesh,
-    /// rings placed from the cylinder carry the estimator's error between the two frames.
-    ///
-    /// # Errors
-    /// [`PlanError::InvalidObstacle`] for an index out of range or a malformed replacement.
-    pub fn with_replaced_obstacles(
-        &self,
-        replacements: &[(usize, Obstacle)],
-    ) -> Result<Self, PlanError> {
-        let mut obstacles = self.obstacles.clone();
-        for (index, with) in replacements {
-            let slot = obstacles
-                .get_mut(*index)
-                .ok_or_else(|| PlanError::InvalidObstacle {
-                    index: *index,
-                    reason: format!(
-                        "no obstacle to replace: the environment has {}",
-                        self.obstacles.len()
-                    ),
-                })?;
-            *slot = ObstacleShape::new(*index, with)?;
-        }
-        Ok(Self {
-            terrain: self.terrain.clone(),
-            obstacles,
-        })
-    }
-
     /// An environment with nothing in it.
     pub fn empty() -> Self {
         Self {
@@ -733,35 +700,6 @@ mod tests {
         assert!((c.clearance_m - 2.0).abs() < 1e-12);
         let c = env.clearance_at(&Point3::new(0.0, 4.0, 6.0)).unwrap();
         assert!((c.clearance_m - 5.0).abs() < 1e-12);
-    }
-
-    #[test]
-    fn a_replaced_obstacle_keeps_its_index_and_the_others_stay() {
-        let pillar = |x: f64| Obstacle::Cylinder {
-            center_x_m: x,
-            center_y_m: 0.0,
-            radius_m: 0.5,
-            z_bottom_m: 0.0,
-            z_top_m: 2.0,
-        };
-        let env = Environment::new(None, &[unit_cube_at_10_0_1(), pillar(0.0)]).unwrap();
-        // The cube moved 2 m west, as a cylinder: a point 2.5 m west of the old cube is now
-        // 0.5 m from it, and still measured to obstacle 0.
-        let moved = env.with_replaced_obstacles(&[(0, pillar(8.0))]).unwrap();
-        let c = moved.clearance_at(&Point3::new(7.0, 0.0, 1.0)).unwrap();
-        assert_eq!(c.source, ClearanceSource::Obstacle(0));
-        assert!((c.clearance_m - 0.5).abs() < 1e-12, "{c:?}");
-        let c = moved.clearance_at(&Point3::new(0.0, 1.5, 1.0)).unwrap();
-        assert_eq!(c.source, ClearanceSource::Obstacle(1));
-        assert!((c.clearance_m - 1.0).abs() < 1e-12);
-        // The original is untouched.
-        let c = env.clearance_at(&Point3::new(7.0, 0.0, 1.0)).unwrap();
-        assert_eq!(c.source, ClearanceSource::Obstacle(0));
-        assert!((c.clearance_m - 2.5).abs() < 1e-5, "{c:?}");
-        assert!(matches!(
-            env.with_replaced_obstacles(&[(2, pillar(0.0))]),
-            Err(PlanError::InvalidObstacle { index: 2, .. })
-        ));
     }
 
     #[test]

@@ -782,19 +782,19 @@ impl<'a> Mission<'a> {
     }
 
     /// Plans the mapping rings around `cylinder` from where the vehicle is and starts flying
-    /// them; on an error the current trajectory is kept. The target stands in the planning
-    /// environment as `cylinder` ([`super::environment::target_environment`]).
+    /// them; on an error the current trajectory is kept.
     fn fly_rings_around(&mut self, cylinder: &VerticalCylinder) -> MissionResult<RingPlan> {
         let config = &self.inputs.config;
-        let env = super::environment::target_environment(&self.env, self.inputs.world, cylinder)?;
         let rings = config.planning.rings_around(
             cylinder,
             &self.sensors.vehicle().current_waypoint(),
-            &env,
+            &self.env,
         )?;
-        self.sensors
-            .vehicle_mut()
-            .follow(&rings.path.waypoints[1..], &env, &config.planning)?;
+        self.sensors.vehicle_mut().follow(
+            &rings.path.waypoints[1..],
+            &self.env,
+            &config.planning,
+        )?;
         Ok(rings)
     }
 
