@@ -539,6 +539,14 @@ pub enum Repair {
         /// Radius increase (m).
         widen_m: f64,
     },
+    /// The base ring could be cleared neither widened nor raised, so its waypoints were pushed
+    /// outward one by one, each only as far as the obstacles beside it need.
+    BentRing {
+        /// Ring index.
+        ring: usize,
+        /// Largest push of a waypoint (m).
+        max_push_m: f64,
+    },
     /// A terrain-following ring's waypoints were raised over the terrain, by up to this much.
     FollowedTerrain {
         /// Ring index.

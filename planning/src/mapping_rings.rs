@@ -17,7 +17,7 @@ use nalgebra::Point3;
 use serde::{Deserialize, Serialize};
 
 use crate::camera::CameraConfig;
-use crate::clearance::{ClearanceConfig, ClearanceReport, Environment, Repair};
+use crate::clearance::{ClearanceConfig, ClearanceReport, ClearanceSource, Environment, Repair};
 use crate::error::{PlanError, check_positive, check_range};
 use crate::geometry::{Path, VerticalCylinder, Waypoint, unwrap_near, yaw_toward};
 
@@ -69,7 +69,9 @@ pub struct BaseRingConfig {
     /// odometry (at 5° the far background dominated it and the odometry drifted by centimetres).
     pub camera_pitch_down_deg: f64,
     /// If the ring is too close to terrain or rocks, it is first widened in steps of the
-    /// clearance repair step up to this much (m), which keeps its level view. Default 2.
+    /// clearance repair step up to this much (m), which keeps its level view. Default 2. A ring
+    /// that neither widening nor raising clears is bent: its waypoints are pushed out one by
+    /// one, each by up to this much ([`Repair::BentRing`]).
     pub max_widen_m: f64,
     /// Then raised up to this much (m); beyond that the ring is dropped rather than the plan
     /// refused. Default 1.
@@ -219,6 +221,11 @@ pub struct Ring {
     /// (the base ring, flown low; see [`plan_mapping_rings_clear`]). `z_m` is then the lowest
     /// height flown.
     pub follows_terrain: bool,
+    /// Where an obstacle comes within the clearance of a terrain-following ring, its waypoints
+    /// are pushed outward from the axis, each by up to this much (m); 0 keeps the circle. Set
+    /// by the base ring's last repair ([`Repair::BentRing`]).
+    #[serde(default)]
+    pub max_bend_m: f64,
 }
 
 impl Ring {
@@ -410,6 +417,7 @@ fn plan_mapping_rings_from(
                 band_top_m: 0.0,
                 camera_pitch_down_deg: pitch_deg,
                 follows_terrain: base.is_some() && k == 0,
+                max_bend_m: 0.0,
             }
             .with_band(cylinder, half_scan)
         })
@@ -563,16 +571,26 @@ fn lifted_over_terrain(p: &Point3<f64>, env: &Environment, ccfg: &ClearanceConfi
     )
 }
 
-/// Raises the waypoints of the plan's terrain-following rings over the terrain, and records
-/// the largest lift among the plan's repairs.
-fn lift_terrain_following(plan: &mut RingPlan, env: &Environment, ccfg: &ClearanceConfig) {
+/// Raises the waypoints of the plan's terrain-following rings over the terrain (and pushes a
+/// bent ring's out round the obstacles: [`flown_corners`]), and records the largest lift among
+/// the plan's repairs.
+fn lift_terrain_following(
+    plan: &mut RingPlan,
+    flown: &FlownRing,
+    env: &Environment,
+    ccfg: &ClearanceConfig,
+) {
     let mut largest: Option<(usize, f64)> = None;
     for (k, (ring, range)) in plan.rings.iter().zip(&plan.ring_waypoints).enumerate() {
         if !ring.follows_terrain {
             continue;
         }
+        let corners = (ring.max_bend_m > 0.0).then(|| flown_corners(ring, flown, env, ccfg).0);
         for w in &mut plan.path.waypoints[range.clone()] {
-            let lifted = lifted_over_terrain(&w.position_m, env, ccfg);
+            let lifted = match &corners {
+                Some(corners) => corners[flown.corner_index(ring, &w.position_m)],
+                None => lifted_over_terrain(&w.position_m, env, ccfg),
+            };
             let lift = lifted.z - w.position_m.z;
             w.position_m = lifted;
             if lift > largest.map_or(0.0, |(_, l)| l) {
@@ -586,6 +604,80 @@ fn lift_terrain_following(plan: &mut RingPlan, env: &Environment, ccfg: &Clearan
     }
 }
 
+/// Step of a bent ring's pushes (m): [`ClearanceConfig::repair_step_m`] moves whole rings, a
+/// finer step keeps each waypoint as near the rock as its neighbours allow.
+const BEND_STEP_M: f64 = 0.1;
+
+/// The straight segment from `a` towards `b` sampled every `ccfg.path_sample_spacing_m`, from
+/// `a` included to `b` excluded.
+fn chord_samples(
+    a: Point3<f64>,
+    b: Point3<f64>,
+    ccfg: &ClearanceConfig,
+) -> impl Iterator<Item = Point3<f64>> {
+    let samples = ((b - a).norm() / ccfg.path_sample_spacing_m)
+        .ceil()
+        .max(1.0) as usize;
+    (0..samples).map(move |k| a + (b - a) * (k as f64 / samples as f64))
+}
+
+/// The corners of `ring` as it is flown (`flown.waypoints` of them, counter-clockwise from
+/// `flown.start_azimuth_rad`) and the push of each (m): on its circle, lifted over the terrain
+/// if it follows the terrain, and, for a bent ring ([`Ring::max_bend_m`] > 0), pushed outward
+/// from the axis in steps of [`BEND_STEP_M`], up to that limit, at both ends of every side that
+/// an obstacle (not the terrain) comes within the clearance of.
+fn flown_corners(
+    ring: &Ring,
+    flown: &FlownRing,
+    env: &Environment,
+    ccfg: &ClearanceConfig,
+) -> (Vec<Point3<f64>>, Vec<f64>) {
+    let n = flown.waypoints;
+    let corner = |j: usize, push_m: f64| {
+        let p = Ring {
+            radius_m: ring.radius_m + push_m,
+            ..*ring
+        }
+        .point_at(flown.corner_azimuth_rad(j));
+        if ring.follows_terrain {
+            lifted_over_terrain(&p, env, ccfg)
+        } else {
+            p
+        }
+    };
+    let mut push = vec![0.0; n];
+    let mut corners: Vec<Point3<f64>> = (0..n).map(|j| corner(j, 0.0)).collect();
+    if ring.max_bend_m <= 0.0 {
+        return (corners, push);
+    }
+    let too_close = |p: &Point3<f64>| {
+        env.clearance_at(p).is_some_and(|c| {
+            c.clearance_m < ccfg.min_clearance_m && matches!(c.source, ClearanceSource::Obstacle(_))
+        })
+    };
+    loop {
+        let mut blocked = vec![false; n];
+        for j in 0..n {
+            let k = (j + 1) % n;
+            if chord_samples(corners[j], corners[k], ccfg).any(|p| too_close(&p)) {
+                blocked[j] = true;
+                blocked[k] = true;
+            }
+        }
+        let mut moved = false;
+        for j in (0..n).filter(|&j| blocked[j]) {
+            if push[j] + BEND_STEP_M <= ring.max_bend_m + 1e-9 {
+                push[j] += BEND_STEP_M;
+                corners[j] = corner(j, push[j]);
+                moved = true;
+            }
+        }
+        if !moved {
+            return (corners, push);
+        }
+    }
+}
+
 /// How every ring is flown: where its waypoints start, how many there are, and the half scan
 /// angle β/2 its band is seen with.
 #[derive(Debug, Clone, Copy)]
@@ -595,9 +687,24 @@ struct FlownRing {
     half_scan_rad: f64,
 }
 
+impl FlownRing {
+    /// Azimuth of corner `j` (counter-clockwise from the start), radians.
+    fn corner_azimuth_rad(&self, j: usize) -> f64 {
+        self.start_azimuth_rad + std::f64::consts::TAU * j as f64 / self.waypoints as f64
+    }
+
+    /// Index of the corner of `ring` whose azimuth is nearest that of `p`.
+    fn corner_index(&self, ring: &Ring, p: &Point3<f64>) -> usize {
+        let azimuth = (p.y - ring.center_y_m).atan2(p.x - ring.center_x_m);
+        let turns = (azimuth - self.start_azimuth_rad) / std::f64::consts::TAU;
+        ((turns * self.waypoints as f64).round() as i64).rem_euclid(self.waypoints as i64) as usize
+    }
+}
+
 /// Moves a ring that comes too close to `env` until it is clear, trying in order:
 /// - the base ring (`base` given): widening it (which keeps its level view of the neck), then
-///   raising it, within the base ring's limits;
+///   raising it, within the base ring's limits, and last bending it (each waypoint pushed out
+///   only as far as the obstacles beside it need, up to the widening limit: [`flown_corners`]);
 /// - any other ring: sliding it up and out along its lower scan ray (which keeps its band's
 ///   bottom), then raising it, within `ccfg.max_raise_m`.
 ///
@@ -656,9 +763,30 @@ fn repair_ring(
             };
             Some((cand, repair))
         })
+        .or_else(|| {
+            // Last, before the ring is dropped: bent round what blocks it, each waypoint pushed
+            // out only where it must be (a rock on one side and another rock across the ring
+            // leave no circle clear: library-b's 1.8 m block, with a boulder 4.8 m away).
+            let bent = Ring {
+                max_bend_m: base?.max_widen_m,
+                ..*ring
+            };
+            ring_clearance(&bent, flown, env, ccfg).is_clear().then(|| {
+                let (_, push) = flown_corners(&bent, flown, env, ccfg);
+                let max_push_m = push.iter().copied().fold(0.0, f64::max);
+                (
+                    bent,
+                    Repair::BentRing {
+                        ring: k,
+                        max_push_m,
+                    },
+                )
+            })
+        })
 }
 
-/// The clearance of a ring as it is flown: the closed polygon through its waypoints, sampled every `ccfg.path_sample_spacing_m`. Its chords cut inside the
+/// The clearance of a ring as it is flown: the closed polygon through its corners
+/// ([`flown_corners`]), sampled every `ccfg.path_sample_spacing_m`. Its chords cut inside the
 /// circle (by R·(1 − cos(π/n)), 5 cm for the default ring), which matters for the base ring,
 /// level with the rock.
 fn ring_clearance(
@@ -667,25 +795,11 @@ fn ring_clearance(
     env: &Environment,
     ccfg: &ClearanceConfig,
 ) -> ClearanceReport {
-    let (start_azimuth_rad, n) = (flown.start_azimuth_rad, flown.waypoints);
-    let corners: Vec<Point3<f64>> = (0..n)
-        .map(|j| ring.point_at(start_azimuth_rad + std::f64::consts::TAU * j as f64 / n as f64))
-        .map(|p| {
-            if ring.follows_terrain {
-                lifted_over_terrain(&p, env, ccfg)
-            } else {
-                p
-            }
-        })
+    let (corners, _) = flown_corners(ring, flown, env, ccfg);
+    let n = corners.len();
+    let pts: Vec<Point3<f64>> = (0..n)
+        .flat_map(|j| chord_samples(corners[j], corners[(j + 1) % n], ccfg))
         .collect();
-    let mut pts = Vec::new();
-    for (j, a) in corners.iter().enumerate() {
-        let b = corners[(j + 1) % n];
-        let samples = ((b - a).norm() / ccfg.path_sample_spacing_m)
-            .ceil()
-            .max(1.0) as usize;
-        pts.extend((0..samples).map(|k| a + (b - a) * (k as f64 / samples as f64)));
-    }
     env.check_points(pts.iter(), ccfg)
 }
 
@@ -701,8 +815,8 @@ fn ring_clearance(
 /// [`PlanError::TargetBelowTerrain`] if the cylinder's centre is underground, and with
 /// [`PlanError::Clearance`] if no repair within `ccfg.max_raise_m` works.
 ///
-/// When the base ring makes the plan fail (no widening or raise within its limits clears it,
-/// or no route to or from it is clear), the plan is made again without it, and
+/// When the base ring makes the plan fail (no widening, raise or bend within its limits clears
+/// it, or no route to or from it is clear), the plan is made again without it, and
 /// [`Repair::DroppedRing`] says so: the paper's rings alone still map the rock.
 pub fn plan_mapping_rings_clear(
     cylinder: &VerticalCylinder,
@@ -822,7 +936,7 @@ fn plan_rings_clear_once(
             repairs.clone(),
             route,
         );
-        lift_terrain_following(&mut out, env, ccfg);
+        lift_terrain_following(&mut out, &flown, env, ccfg);
         let report = env.check_path(&out.path, ccfg);
         if report.is_clear() {
             if route != Route::DIRECT || azimuth_shift_rad != 0.0 {

@@ -460,6 +460,70 @@ fn blocked_base_ring_is_dropped_and_the_paper_rings_are_flown() {
     }
 }
 
+/// The rock seen 0.8 m east of its cylinder (as a localization error puts it), and a boulder
+/// 4.6 m west of the axis: no circle clears both (widening moves the base ring into the
+/// boulder, and both are too tall to climb over within the base ring's limits), so the base ring
+/// bends: its waypoints beside the rock are pushed out, those beside the boulder stay.
+#[test]
+fn base_ring_between_two_rocks_bends_round_the_near_one() {
+    let pillar = |x: f64, r: f64| Obstacle::Cylinder {
+        center_x_m: x,
+        center_y_m: 0.0,
+        radius_m: r,
+        z_bottom_m: -1.0,
+        z_top_m: 3.0,
+    };
+    let env = Environment::new(None, &[pillar(0.8, 1.0), pillar(-4.6, 0.5)]).unwrap();
+    let cfg = PlanningConfig::default();
+    let cyl = VerticalCylinder::new(0.0, 0.0, 1.0, 0.0, 2.5).unwrap();
+    let start = Waypoint::new(Point3::new(-10.0, 0.0, 10.0), 0.0);
+    let plan = common::plan_rings(&cyl, &start, &env, &cfg).unwrap();
+    assert!(plan.flies_base_ring(), "{:?}", plan.repairs);
+    let max_push_m = plan
+        .repairs
+        .iter()
+        .find_map(|r| match r {
+            Repair::BentRing {
+                ring: 0,
+                max_push_m,
+            } => Some(*max_push_m),
+            _ => None,
+        })
+        .unwrap_or_else(|| panic!("{:?}", plan.repairs));
+    assert!((0.8..=2.0).contains(&max_push_m), "{max_push_m}");
+    assert!(plan.clearance.as_ref().unwrap().is_clear());
+    let base = plan.rings[0];
+    let radius_at = |w: &Waypoint| w.position_m.xy().coords.norm();
+    let ring = &plan.path.waypoints[plan.ring_waypoints[0].clone()];
+    // Due east, the rock's surface is 1.8 m out: the ring must reach 3.3 m there.
+    let east = ring
+        .iter()
+        .max_by(|a, b| a.position_m.x.total_cmp(&b.position_m.x))
+        .unwrap();
+    assert!(radius_at(east) >= 3.3 - 1e-9, "{}", radius_at(east));
+    for w in ring {
+        let r = radius_at(w);
+        if w.position_m.x < -1.5 {
+            assert!(
+                (r - base.radius_m).abs() < 1e-9,
+                "west waypoint at radius {r}"
+            );
+        }
+        // The camera still faces the axis.
+        let toward_axis = (-w.position_m.y).atan2(-w.position_m.x);
+        let turn = (w.yaw_rad - toward_axis).rem_euclid(std::f64::consts::TAU);
+        assert!(
+            turn.min(std::f64::consts::TAU - turn) < 1e-6,
+            "yaw off by {turn}"
+        );
+    }
+    // Without the bend, the ring is dropped.
+    let mut circle_only = cfg;
+    circle_only.mapping.base_ring.max_widen_m = 0.0;
+    let dropped = common::plan_rings(&cyl, &start, &env, &circle_only).unwrap();
+    assert!(!dropped.flies_base_ring(), "{:?}", dropped.repairs);
+}
+
 #[test]
 fn base_ring_on_a_scarp_follows_the_terrain() {
     // A 1.5 m step (a scarp, 1 m wide) 1.5 m east of a rock whose ground is at 0: a level
