@@ -221,8 +221,7 @@ pub fn rock_cylinder(
 
 /// `old` moved to where the detector sees its target in `frame` (taken at
 /// `world_from_camera`): the box nearest the cylinder's middle (within a quarter of the image),
-/// whole in the image, gives the centre from the depth inside it ([`center_in_box`], at most
-/// `old`'s radius beyond the nearest surface). `None`
+/// whole in the image, gives the centre from the depth inside it ([`center_in_box`]). `None`
 /// when no such box is seen or it lies more than `max_move_m` away. Returns the moved
 /// cylinder and how far it moved, m.
 ///
@@ -244,7 +243,7 @@ pub fn cylinder_seen_in_frame(
     let seen = perception
         .detect_near(frame, camera, world_from_camera, &mid, gate_px)?
         .filter(|b| b.is_inside_image(camera.width, camera.height, 2.0))
-        .and_then(|b| center_in_box(camera, &frame.depth_m, world_from_camera, &b, old.radius_m))
+        .and_then(|b| center_in_box(camera, &frame.depth_m, world_from_camera, &b))
         .map(|c| (c, (c.x - old.center_x_m).hypot(c.y - old.center_y_m)))
         .filter(|&(_, moved_m)| moved_m <= max_move_m);
     let Some((seen, moved_m)) = seen else {
