@@ -771,8 +771,8 @@ fn repair_ring(
                 max_bend_m: base?.max_widen_m,
                 ..*ring
             };
-            ring_clearance(&bent, flown, env, ccfg).is_clear().then(|| {
-                let (_, push) = flown_corners(&bent, flown, env, ccfg);
+            let (corners, push) = flown_corners(&bent, flown, env, ccfg);
+            polygon_clearance(&corners, env, ccfg).is_clear().then(|| {
                 let max_push_m = push.iter().copied().fold(0.0, f64::max);
                 (
                     bent,
@@ -795,7 +795,16 @@ fn ring_clearance(
     env: &Environment,
     ccfg: &ClearanceConfig,
 ) -> ClearanceReport {
-    let (corners, _) = flown_corners(ring, flown, env, ccfg);
+    polygon_clearance(&flown_corners(ring, flown, env, ccfg).0, env, ccfg)
+}
+
+/// The clearance of the closed polygon through `corners`, sampled every
+/// `ccfg.path_sample_spacing_m`.
+fn polygon_clearance(
+    corners: &[Point3<f64>],
+    env: &Environment,
+    ccfg: &ClearanceConfig,
+) -> ClearanceReport {
     let n = corners.len();
     let pts: Vec<Point3<f64>> = (0..n)
         .flat_map(|j| chord_samples(corners[j], corners[(j + 1) % n], ccfg))

@@ -373,7 +373,7 @@ mod tests {
                 let t = motion.time_s() + 0.1;
                 motion.advance_to(t, &Vector3::zeros()).unwrap();
                 let p = motion.state().position_m;
-                stray_m = stray_m.max(((p.x - here.x).powi(2) + (p.y - here.y).powi(2)).sqrt());
+                stray_m = stray_m.max((p.xy() - here.xy()).norm());
             }
             assert!((motion.state().position_m - up.position_m).norm() < 0.2);
             (speed, stray_m)

@@ -551,9 +551,8 @@ fn estimate_noise(
         .filter(|w| w.is_finite())
         .collect();
     whitened.sort_by(f64::total_cmp);
-    let odometry_variance_factor = Some(whitened.len())
-        .filter(|&n| n >= MIN_ODOMETRY_PRIORS)
-        .map(|_| crate::stats::percentile_sorted(&whitened, 0.5) / CHI2_6_MEDIAN)
+    let odometry_variance_factor = (whitened.len() >= MIN_ODOMETRY_PRIORS)
+        .then(|| crate::stats::percentile_sorted(&whitened, 0.5) / CHI2_6_MEDIAN)
         .filter(|f| f.is_finite() && *f > 0.0)
         .unwrap_or(1.0);
     Some(NoiseEstimate {
