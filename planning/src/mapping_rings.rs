@@ -13,7 +13,7 @@
 
 use std::ops::Range;
 
-use nalgebra::Point3;
+use nalgebra::{Point3, Vector2};
 use serde::{Deserialize, Serialize};
 
 use crate::camera::CameraConfig;
@@ -47,6 +47,15 @@ pub struct MappingRingConfig {
     /// A low ring, flown first, that looks almost level at the rock's base. Default
     /// [`BaseRingConfig::default`] (on).
     pub base_ring: BaseRingConfig,
+    /// On leaving the rings, how far the vehicle first backs away from the axis, level, before
+    /// it climbs (m; [`RingPlan::exit_waypoints`]). Default 1.5, the standoff. 0 climbs straight
+    /// up from where mapping ended.
+    ///
+    /// Why: the climb is flown on the state estimate, which walks while the vehicle rises (on
+    /// library-b seed 35 it walked 0.65 m sideways in the 8 s climb and took the vehicle from
+    /// 1.80 m to 1.06 m off the rock's axis, 0.39 m from the rock). A rock wider above than
+    /// where mapping ended is passed closer still.
+    pub exit_backoff_m: f64,
 }
 
 /// The base ring: the paper's rings all look down at γ, so from every ring a rock's contact
@@ -124,6 +133,7 @@ impl Default for MappingRingConfig {
             max_rings: 20,
             below_terrain_tolerance_m: 0.5,
             base_ring: BaseRingConfig::default(),
+            exit_backoff_m: 1.5,
         }
     }
 }
@@ -152,6 +162,7 @@ impl MappingRingConfig {
             0.0,
             1e3,
         )?;
+        check_range("mapping.exit_backoff_m", self.exit_backoff_m, 0.0, 1e3)?;
         if self.waypoints_per_ring < 3 {
             return Err(PlanError::InvalidParameter {
                 field: "mapping.waypoints_per_ring".into(),
@@ -307,6 +318,38 @@ impl RingPlan {
                     w[0].1 + (w[1].1 - w[0].1) * (z_m - w[0].0) / span
                 }
             })
+    }
+
+    /// The way out of the rings from `here` (world frame, m) up to `altitude_m`: first level and
+    /// straight away from the cylinder's axis by `backoff_m`, then straight up, the heading kept
+    /// (the camera still faces the rock). From on the axis itself the vehicle backs away along
+    /// the rings' start azimuth. With `backoff_m` 0 it is one waypoint straight up.
+    ///
+    /// The caller checks the way for clearance (the back-off may lead into another obstacle);
+    /// straight up is the fallback.
+    pub fn exit_waypoints(
+        &self,
+        here: &Waypoint,
+        altitude_m: f64,
+        backoff_m: f64,
+    ) -> Vec<Waypoint> {
+        let axis = Vector2::new(self.cylinder.center_x_m, self.cylinder.center_y_m);
+        let offset = here.position_m.xy().coords - axis;
+        let outward = if offset.norm() > 1e-6 {
+            offset.normalize()
+        } else {
+            Vector2::new(self.start_azimuth_rad.cos(), self.start_azimuth_rad.sin())
+        };
+        let mut waypoints = Vec::with_capacity(2);
+        let mut at = here.position_m;
+        if backoff_m > 0.0 {
+            at.x += outward.x * backoff_m;
+            at.y += outward.y * backoff_m;
+            waypoints.push(Waypoint::new(at, here.yaw_rad));
+        }
+        at.z = altitude_m;
+        waypoints.push(Waypoint::new(at, here.yaw_rad));
+        waypoints
     }
 
     /// Whether the plan flies the base ring (the ring that follows the terrain).

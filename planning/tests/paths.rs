@@ -567,3 +567,66 @@ fn base_ring_on_a_scarp_follows_the_terrain() {
     assert!(report.is_clear());
     assert!(traj.duration_s() < 600.0, "{} s", traj.duration_s());
 }
+
+/// A rock wider above than below (a cap of 1.6 m radius on a 0.6 m neck): mapping that ends
+/// on the base ring, 2.1 m off the axis, would climb straight up 0.5 m past the cap. The exit
+/// backs away first and keeps 2 m.
+#[test]
+fn exit_backs_away_from_an_overhang_before_climbing() {
+    let cfg = PlanningConfig::default();
+    let env = Environment::new(
+        None,
+        &[
+            Obstacle::Cylinder {
+                center_x_m: 0.0,
+                center_y_m: 0.0,
+                radius_m: 0.6,
+                z_bottom_m: 0.0,
+                z_top_m: 2.5,
+            },
+            Obstacle::Cylinder {
+                center_x_m: 0.0,
+                center_y_m: 0.0,
+                radius_m: 1.6,
+                z_bottom_m: 2.5,
+                z_top_m: 3.5,
+            },
+        ],
+    )
+    .unwrap();
+    let cyl = VerticalCylinder::new(0.0, 0.0, 1.6, 0.0, 3.5).unwrap();
+    let start = Waypoint::new(Point3::new(-10.0, 0.0, 10.0), 0.0);
+    let plan = plan_mapping_rings(&cyl, &start, &cfg.camera, &cfg.mapping).unwrap();
+    let here = Waypoint::new(Point3::new(2.1 * 0.6, 2.1 * 0.8, 1.8), -2.0);
+    // The clearance of the climb: from the last level waypoint up.
+    let climb_clearance = |waypoints: &[Waypoint]| {
+        let from = waypoints
+            .len()
+            .checked_sub(2)
+            .map_or(here, |i| waypoints[i]);
+        let climb = Path::new(vec![from, *waypoints.last().unwrap()]);
+        env.check_path(&climb, &cfg.clearance)
+            .min_clearance_m
+            .unwrap()
+    };
+    let exit = plan.exit_waypoints(&here, 10.0, 1.5);
+    assert_eq!(exit.len(), 2);
+    // Level, 1.5 m further out along the same azimuth, heading kept; then straight up.
+    let out = exit[0].position_m;
+    assert!((out.z - 1.8).abs() < 1e-12);
+    assert!((out.xy().coords.norm() - 3.6).abs() < 1e-9);
+    assert!((out.y.atan2(out.x) - 0.8f64.atan2(0.6)).abs() < 1e-12);
+    assert_eq!(exit[0].yaw_rad, -2.0);
+    assert_eq!(exit[1].position_m, Point3::new(out.x, out.y, 10.0));
+    assert!((climb_clearance(&exit) - 2.0).abs() < 0.05);
+
+    let straight = plan.exit_waypoints(&here, 10.0, 0.0);
+    assert_eq!(straight.len(), 1);
+    assert!((climb_clearance(&straight) - 0.5).abs() < 0.05);
+
+    // From the axis itself, out along the rings' start azimuth.
+    let on_axis = Waypoint::new(Point3::new(0.0, 0.0, 6.0), 0.0);
+    let up = plan.exit_waypoints(&on_axis, 10.0, 1.5)[0].position_m;
+    let a = plan.start_azimuth_rad;
+    assert!((up - Point3::new(1.5 * a.cos(), 1.5 * a.sin(), 6.0)).norm() < 1e-12);
+}

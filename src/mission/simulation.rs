@@ -889,7 +889,7 @@ impl<'a> Mission<'a> {
     /// Back to the lawn-mower from where it was left.
     fn resume_search(&mut self, timings: &mut StageTimings) -> MissionResult<()> {
         self.perception.reset_tracks()?;
-        self.ring_plan = None;
+        let rings = self.ring_plan.take();
         let clock = Instant::now();
         let mut path: Vec<Waypoint> = self.resume_point.take().into_iter().collect();
         path.extend_from_slice(
@@ -900,16 +900,35 @@ impl<'a> Mission<'a> {
             self.set_mode(Mode::Done);
             return Ok(());
         }
-        // Climb back to the search altitude first, straight up and from rest, so the way back
-        // is clear: the vehicle may still carry its ring speed, beside the rock.
+        // Climb back to the search altitude first, from rest, so the way back is clear: the
+        // vehicle may still carry its ring speed, beside the rock. From the rings it first
+        // backs away from the rock; where that way is not clear, it climbs straight up.
         let here = self.sensors.vehicle().current_waypoint();
-        let mut climb = here;
-        climb.position_m.z = self.search.altitude_m;
-        let mut waypoints = vec![climb];
-        waypoints.extend(path);
-        self.sensors
-            .vehicle_mut()
-            .follow_from_rest(&waypoints, &self.env, &config.planning)?;
+        let altitude_m = self.search.altitude_m;
+        let backoff_m = config.planning.mapping.exit_backoff_m;
+        let exit = |backoff_m: f64| match &rings {
+            Some(rings) => rings.exit_waypoints(&here, altitude_m, backoff_m),
+            None => {
+                let mut climb = here;
+                climb.position_m.z = altitude_m;
+                vec![climb]
+            }
+        };
+        let with_path = |mut waypoints: Vec<Waypoint>| {
+            waypoints.extend_from_slice(&path);
+            waypoints
+        };
+        let vehicle = self.sensors.vehicle_mut();
+        let backed_off =
+            vehicle.follow_from_rest(&with_path(exit(backoff_m)), &self.env, &config.planning);
+        match backed_off {
+            Ok(()) => {}
+            Err(e) if rings.is_some() && backoff_m > 0.0 => {
+                tracing::warn!("backing away from the rings: {e}; climbing straight up");
+                vehicle.follow_from_rest(&with_path(exit(0.0)), &self.env, &config.planning)?;
+            }
+            Err(e) => return Err(e.into()),
+        }
         timings.planning_s += clock.elapsed().as_secs_f64();
         self.set_mode(Mode::Search);
         Ok(())
