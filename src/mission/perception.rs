@@ -84,9 +84,6 @@ pub fn median_depth_in_box(
 /// points count as the target, metres.
 const ABOVE_GROUND_M: f64 = 0.25;
 
-/// How far behind its nearest point [`center_in_box`] looks for the object, in widths of the
-/// box at that range.
-const OBJECT_DEPTH_OVER_WIDTH: f64 = 1.5;
 /// Fewest target points [`center_in_box`] accepts.
 const MIN_TARGET_POINTS: usize = 30;
 
@@ -97,8 +94,7 @@ fn quantile(values: &mut [f64], q: f64) -> f64 {
 
 /// The centre of the object in `bbox`, from the depth points inside the box, in the frame of
 /// `world_from_camera` (world ENU metres). Points more than 0.25 m above the box's lowest
-/// points (the ground at its foot), and no farther behind the nearest of them than 1.5 widths
-/// of the box at that range, are the object. Across the horizontal viewing direction its
+/// points (the ground at its foot) are the object. Across the horizontal viewing direction its
 /// centre is the middle of their extent (1st to 99th percentile, against depth noise); along
 /// it, the nearest of them plus half that extent (a round cross-section). `None` with fewer
 /// than 30 such points.
@@ -157,29 +153,12 @@ pub fn center_in_box(
     let across = nalgebra::Vector2::new(-forward.y, forward.x);
     let along_of = |p: &Point3<f64>| forward.dot(&(p.xy().coords - eye.xy()));
     let across_of = |p: &Point3<f64>| across.dot(&(p.xy().coords - eye.xy()));
-    let nearest = quantile(&mut target.iter().map(along_of).collect::<Vec<_>>(), 0.01);
-    // The box seen at the object's nearest range spans this much: the object lies within that
-    // (and half again, for one longer than it is wide) behind its nearest point. Whatever the
-    // box holds farther back (ground rising behind the rock, another rock) is background: in a
-    // box's far corners it widened the extent across, and pushed the centre back by metres.
-    let nearest_range_m = quantile(
-        &mut target
-            .iter()
-            .map(|p| (p.coords - eye).norm())
-            .collect::<Vec<_>>(),
-        0.01,
-    );
-    let box_width_m = bbox.width() / camera.fx * nearest_range_m;
-    let object: Vec<Point3<f64>> = target
-        .into_iter()
-        .filter(|p| along_of(p) <= nearest + OBJECT_DEPTH_OVER_WIDTH * box_width_m)
-        .collect();
-    let mut across_m: Vec<f64> = object.iter().map(across_of).collect();
+    let mut across_m: Vec<f64> = target.iter().map(across_of).collect();
     let (left, right) = (quantile(&mut across_m, 0.01), quantile(&mut across_m, 0.99));
+    let nearest = quantile(&mut target.iter().map(along_of).collect::<Vec<_>>(), 0.01);
     let half_width = 0.5 * (right - left);
     let center_xy = eye.xy() + forward * (nearest + half_width) + across * (0.5 * (left + right));
-    let z_m = quantile(&mut object.iter().map(|p| p.z).collect::<Vec<_>>(), 0.5);
-    Some(Point3::new(center_xy.x, center_xy.y, z_m))
+    Some(Point3::new(center_xy.x, center_xy.y, median_of(&|p| p.z)))
 }
 
 /// What perception did with one frame: the wall time of each stage, seconds, and what the depth
@@ -520,33 +499,19 @@ mod tests {
         center: &Point3<f64>,
         radius: f64,
     ) -> DepthImage {
-        spheres_on_ground(camera, pose, &[(*center, radius)])
-    }
-
-    /// z-depth of spheres (centre, radius) on the ground plane z = 0, ray-cast from `pose`.
-    fn spheres_on_ground(
-        camera: &PinholeCamera,
-        pose: &Isometry3<f64>,
-        spheres: &[(Point3<f64>, f64)],
-    ) -> DepthImage {
         let mut depth = DepthImage::filled(camera.width, camera.height, 0.0);
         let eye = pose.translation.vector;
         for v in 0..camera.height {
             for u in 0..camera.width {
                 let ray_camera = camera.unproject(&Point2::new(f64::from(u), f64::from(v)), 1.0);
                 let ray = pose.rotation * ray_camera.coords;
-                let sphere_t = spheres
-                    .iter()
-                    .filter_map(|(center, radius)| {
-                        let oc = eye - center.coords;
-                        let (b, c) = (oc.dot(&ray), oc.norm_squared() - radius * radius);
-                        let a = ray.norm_squared();
-                        let disc = b * b - a * c;
-                        (disc >= 0.0)
-                            .then(|| (-b - disc.sqrt()) / a)
-                            .filter(|t| *t > 0.0)
-                    })
-                    .min_by(f64::total_cmp);
+                let oc = eye - center.coords;
+                let (b, c) = (oc.dot(&ray), oc.norm_squared() - radius * radius);
+                let a = ray.norm_squared();
+                let disc = b * b - a * c;
+                let sphere_t = (disc >= 0.0)
+                    .then(|| (-b - disc.sqrt()) / a)
+                    .filter(|t| *t > 0.0);
                 let ground_t = (ray.z < 0.0).then(|| -eye.z / ray.z);
                 // The ray is scaled so that t is the z-depth.
                 if let Some(t) = sphere_t.or(ground_t) {
@@ -555,30 +520,6 @@ mod tests {
             }
         }
         depth
-    }
-
-    /// A boulder 4 m behind the rock fills the top of the rock's box from a low view: it is
-    /// background, not part of the rock.
-    #[test]
-    fn a_rock_before_a_boulder_is_found_where_it_stands() {
-        let camera = PinholeCamera::from_hfov(320, 240, 80.0).unwrap();
-        let (center, radius) = (Point3::new(0.0, 0.0, 0.6), 0.6);
-        let boulder = (Point3::new(4.0, 0.5, 1.5), 1.5);
-        let eye = Point3::new(-5.0, 0.0, 1.4);
-        let pose = look_at(&eye, &center, &Vector3::z()).unwrap();
-        let depth = spheres_on_ground(&camera, &pose, &[(center, radius), boulder]);
-        let px = camera.project(&(pose.inverse() * center)).unwrap();
-        let r_px = radius / 5.0 * camera.fx * 1.2;
-        let bbox = BoundingBox::new(px.x - r_px, px.y - r_px, px.x + r_px, px.y + r_px).unwrap();
-        // The boulder is in the box.
-        let behind = (bbox.y_min as u32..=bbox.y_max as u32)
-            .flat_map(|v| (bbox.x_min as u32..=bbox.x_max as u32).map(move |u| (u, v)))
-            .filter(|&(u, v)| *depth.get(u, v).unwrap() > 7.0)
-            .count();
-        assert!(behind > 100, "{behind} boulder pixels");
-        let found = center_in_box(&camera, &depth, &pose, &bbox).unwrap();
-        let horizontal = (found.xy() - center.xy()).norm();
-        assert!(horizontal < 0.1, "{found:?} is {horizontal} m off");
     }
 
     #[test]
