@@ -48,8 +48,10 @@ pub struct MappingRingConfig {
     /// [`BaseRingConfig::default`] (on).
     pub base_ring: BaseRingConfig,
     /// On leaving the rings, how far the vehicle first backs away from the axis, level, before
-    /// it climbs (m; [`RingPlan::exit_waypoints`]). Default 1.5, the standoff. 0 climbs straight
-    /// up from where mapping ended.
+    /// it climbs (m; [`RingPlan::exit_waypoints`]). Default 0: it climbs straight up from where
+    /// mapping ended. 1.5 (the standoff) lifted every run of a 9-run campaign over 0.5 m true
+    /// clearance, but the default mission's seed 0 then left rock 2 incomplete (the flights after
+    /// the first target change with it); see `docs/campaigns/2026-11-27-session27-*`.
     ///
     /// Why: the climb is flown on the state estimate, which walks while the vehicle rises (on
     /// library-b seed 35 it walked 0.65 m sideways in the 8 s climb and took the vehicle from
@@ -133,7 +135,7 @@ impl Default for MappingRingConfig {
             max_rings: 20,
             below_terrain_tolerance_m: 0.5,
             base_ring: BaseRingConfig::default(),
-            exit_backoff_m: 1.5,
+            exit_backoff_m: 0.0,
         }
     }
 }
