@@ -336,12 +336,11 @@ impl RingPlan {
         backoff_m: f64,
     ) -> Vec<Waypoint> {
         let axis = Vector2::new(self.cylinder.center_x_m, self.cylinder.center_y_m);
-        let offset = here.position_m.xy().coords - axis;
-        let outward = if offset.norm() > 1e-6 {
-            offset.normalize()
-        } else {
-            Vector2::new(self.start_azimuth_rad.cos(), self.start_azimuth_rad.sin())
-        };
+        let outward = (here.position_m.xy().coords - axis)
+            .try_normalize(1e-6)
+            .unwrap_or_else(|| {
+                Vector2::new(self.start_azimuth_rad.cos(), self.start_azimuth_rad.sin())
+            });
         let mut waypoints = Vec::with_capacity(2);
         let mut at = here.position_m;
         if backoff_m > 0.0 {
