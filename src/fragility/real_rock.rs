@@ -21,8 +21,15 @@ pub(crate) fn rock_path() -> std::path::PathBuf {
     std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/rocks/double_rock.ply")
 }
 
-pub(crate) fn load_model() -> TriangleMesh {
-    scarp_export::ply::read_mesh(rock_path()).unwrap()
+/// The scanned model, or `None` (with a message) where `../shared` is not beside the
+/// repository, as in a lone clone: the test then skips, as the BAL tests do.
+pub(crate) fn load_model() -> Option<TriangleMesh> {
+    let path = rock_path();
+    if !path.exists() {
+        println!("skipping: {} is absent", path.display());
+        return None;
+    }
+    Some(scarp_export::ply::read_mesh(path).unwrap())
 }
 
 /// The rotation that stands the model on its vertex farthest from its centre of mass: that
@@ -148,7 +155,9 @@ fn config() -> FragilityConfig {
 
 #[test]
 fn real_rock_alpha_min_is_stable_under_remeshing() {
-    let model = load_model();
+    let Some(model) = load_model() else {
+        return;
+    };
     let ped = pedestal();
     let cfg = config();
     let rotation = balancing_rotation(&model);
