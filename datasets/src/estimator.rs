@@ -126,6 +126,20 @@ impl EstimatorConfig {
     }
 }
 
+impl EstimatorConfig {
+    /// How the error of the estimated rotation between two poses grows with the time Δt
+    /// between them, degrees per √second: about this × √Δt (1σ, the three axes together).
+    ///
+    /// Each axis's error is a Gauss–Markov process, whose change over Δt has the variance
+    /// 2σ²(1 − e^(−Δt/τ)) ≤ 2σ²Δt/τ: exact for Δt ≪ `attitude_correlation_s`, an upper bound
+    /// beyond it.
+    pub fn attitude_walk_deg_per_sqrt_s(&self) -> f64 {
+        let sigma_deg =
+            (self.yaw_sigma_deg.powi(2) + 2.0 * self.roll_pitch_sigma_deg.powi(2)).sqrt();
+        sigma_deg * (2.0 / self.attitude_correlation_s.max(1e-9)).sqrt()
+    }
+}
+
 /// A first-order Gauss–Markov process with stationary σ and correlation time τ.
 #[derive(Debug, Clone, Copy)]
 struct GaussMarkov {

@@ -136,6 +136,20 @@ impl MissionConfig {
             }
         }
         self.safety.validate()?;
+        for (key, value) in [
+            (
+                "mapping.estimate_gate_sigmas",
+                self.mapping.estimate_gate_sigmas,
+            ),
+            (
+                "mapping.estimate_gate_min_deg",
+                self.mapping.estimate_gate_min_deg,
+            ),
+        ] {
+            if !(value.is_finite() && value >= 0.0) {
+                return Err(format!("`{key}` = {value}: must be a number ≥ 0"));
+            }
+        }
         if !(self.search_inset_m.is_finite() && self.search_inset_m >= 0.0) {
             return Err(format!(
                 "`search_inset_m` = {}: must be ≥ 0",
@@ -280,6 +294,32 @@ pub struct MappingConfig {
     /// around the rock while the GPS walk wanders. Default false: an odometry failure then
     /// steers the vehicle too (seen once on the default world, 0.9 m from the rock).
     pub fly_on_odometry: bool,
+    /// A mapped frame whose tracked rotation since the previous frame strays from the state
+    /// estimator's by more than `estimate_gate_min_deg` plus this many σ of the estimator's
+    /// attitude walk over the time between them (`[estimator]`'s attitude σ and correlation
+    /// time) is dropped: not fused, not a keyframe. 0 turns the gate off. Default 4: on the
+    /// default world's seed 36 (with 300° localization), the 1677 frames tracked right
+    /// (within 0.01° of the truth) strayed from the estimate by at most 1.03° (median 0.17°),
+    /// and one that did not (5.5° off, 0.22 m) became a keyframe that carried its error into
+    /// the rest of the map (ATE 8.2 cm, F@2cm 0.41).
+    pub estimate_gate_sigmas: f64,
+    /// The gate's floor, degrees (the odometry's own error and the estimator's noise at once).
+    /// Default 0.5.
+    pub estimate_gate_min_deg: f64,
+}
+
+impl MappingConfig {
+    /// The tracker's gate against the state estimate (`None` when `estimate_gate_sigmas` is
+    /// 0), scaled to `estimator`'s attitude walk.
+    pub fn estimate_rotation_gate(
+        &self,
+        estimator: &scarp_datasets::estimator::EstimatorConfig,
+    ) -> Option<scarp_slam::mapping::EstimateRotationGate> {
+        (self.estimate_gate_sigmas > 0.0).then(|| scarp_slam::mapping::EstimateRotationGate {
+            min_deg: self.estimate_gate_min_deg,
+            deg_per_sqrt_s: self.estimate_gate_sigmas * estimator.attitude_walk_deg_per_sqrt_s(),
+        })
+    }
 }
 
 impl Default for MappingConfig {
@@ -296,6 +336,8 @@ impl Default for MappingConfig {
             keyframes: scarp_slam::keyframes::KeyframeConfig::default(),
             reintegration_frame_stride: 2,
             fly_on_odometry: false,
+            estimate_gate_sigmas: 4.0,
+            estimate_gate_min_deg: 0.5,
         }
     }
 }

@@ -73,6 +73,8 @@ pub struct MappingSession {
     /// The last mapped frame's odometry position minus its true position (simulation only:
     /// what a controller flying on the odometry would be off by).
     navigation_error_m: Option<Vector3<f64>>,
+    /// Frames dropped: their odometry failed or disagreed with the state estimate.
+    frames_dropped: usize,
 }
 
 /// Frames tried to see the target in before its map starts where the localization put it
@@ -324,6 +326,7 @@ impl MappingSession {
             tsdf,
             odometry: m.odometry.clone(),
             keyframes: m.keyframes,
+            estimate_rotation_gate: m.estimate_rotation_gate(&config.estimator),
             ..ModelTrackingConfig::default()
         };
         Ok(Self {
@@ -338,6 +341,7 @@ impl MappingSession {
             frames_mapped: 0,
             coverage_required: true,
             navigation_error_m: None,
+            frames_dropped: 0,
         })
     }
 
@@ -426,6 +430,26 @@ impl MappingSession {
         }
         frame.instance_mask = None;
         let tracked = self.tracker.process(&frame, world_from_camera_estimate)?;
+        if tracked.dropped {
+            self.frames_dropped += 1;
+            tracing::debug!(
+                "target {}: frame at {:.2} s dropped: {}",
+                self.target_id,
+                frame.timestamp_s,
+                match (
+                    &tracked.disagreement,
+                    tracked.odometry.as_ref().and_then(|o| o.failure.as_ref())
+                ) {
+                    (Some(d), _) => format!(
+                        "its tracked rotation strays {:.2}° from the state estimate's (tolerance {:.2}°)",
+                        d.rotation_deg, d.tolerance_deg
+                    ),
+                    (None, Some(f)) => format!("the odometry failed ({f})"),
+                    (None, None) => "untrusted".into(),
+                }
+            );
+            return Ok(());
+        }
         self.navigation_error_m = world_from_camera_truth
             .filter(|_| !tracked.fell_back)
             .map(|truth| tracked.world_from_camera.translation.vector - truth.translation.vector);
@@ -572,6 +596,7 @@ pub fn finish_target(
 ) -> MissionResult<bool> {
     let clock = Instant::now();
     report.frames_mapped = session.frames_mapped;
+    report.frames_dropped = session.frames_dropped;
     report.coverage = session.coverage.fraction();
     report.base_coverage = session.coverage.bottom_fraction();
     report.sweep_deg = session.coverage.sweep_deg();

@@ -34,6 +34,11 @@ pub struct TargetReport {
     pub found_at_s: f64,
     /// Frames fused into its map.
     pub frames_mapped: usize,
+    /// Frames seen while mapping but dropped: their odometry failed or strayed from the state
+    /// estimate (`mapping.estimate_gate_sigmas`), and placing them by the estimate would have
+    /// shifted the map (see [`scarp_slam::mapping::ModelTrackingConfig::max_dropped_frames`]).
+    #[serde(default)]
+    pub frames_dropped: usize,
     /// Keyframes in its bundle adjustment.
     pub keyframes: usize,
     /// Whether its point set converged before mapping (false: mapped from a compact but

@@ -30,7 +30,10 @@ pub use refine::{
 pub use residuals::{
     CHI2_6_MEDIAN, ReprojectionStats, odometry_nees, reprojection_stats, triangulate_point,
 };
-pub use tracker::{ModelTracker, ModelTrackingConfig, TrackedFrame, TrackingReferenceKind};
+pub use tracker::{
+    EstimateDisagreement, EstimateRotationGate, ModelTracker, ModelTrackingConfig, TrackedFrame,
+    TrackingReferenceKind,
+};
 
 /// An error of the mapping pipeline.
 #[derive(Debug, Error)]

@@ -4,10 +4,19 @@
 //! The initial guess is the state estimator's relative motion since the previous frame
 //! ([`ModelTracker::process`]), or, for a camera with no state estimate (a handheld RGB-D
 //! sequence), the previous frame's tracked motion: a constant-velocity model
-//! ([`ModelTracker::process_unaided`]). When the odometry flags its result as untrustworthy, the
-//! frame is placed with that guessed motion instead (composed onto the previous tracked pose); it
-//! is still fused when the guess came from a state estimate, and skipped (never fused) when it
-//! was only the constant-velocity guess, which a failed frame has no way to check.
+//! ([`ModelTracker::process_unaided`]).
+//!
+//! A frame the tracker cannot trust (the odometry flags its result, or, with a state estimate
+//! and an [`EstimateRotationGate`], its tracked rotation strays from the estimator's by more
+//! than the estimator could have drifted since the previous frame):
+//! - with a state estimate, is dropped (not fused, not a keyframe, not the next frame's
+//!   reference), up to [`ModelTrackingConfig::max_dropped_frames`] in a row; beyond that it is
+//!   placed by the estimate's motion, fused, and re-anchors the keyframes. An IMU's attitude is
+//!   sure over a fraction of a second, so a jump of degrees is the odometry's local minimum;
+//!   and the estimate's frame-to-frame position is off by centimetres, so a frame placed by it
+//!   (and a keyframe taken there) would shift the rest of the map;
+//! - without one, is placed by the constant-velocity guess and never fused, which a failed
+//!   frame has no way to check.
 //!
 //! The tracker also accumulates the covariance of the motion since the last keyframe (the
 //! inverse odometry information of each frame, moved to the keyframe pair's frame with the SE(3)
@@ -69,6 +78,66 @@ pub struct ModelTrackingConfig {
     pub fallback_sigma_m: f64,
     /// The same for rotation, degrees. Default 0.5.
     pub fallback_sigma_deg: f64,
+    /// For frames given a state estimate ([`ModelTracker::process`]): up to this many in a row
+    /// whose odometry failed or disagreed with the estimate are dropped (not fused, not
+    /// keyframes) rather than placed by the estimate's motion; the next one is placed by the
+    /// estimate, fused, and becomes the new keyframe reference. Default 10. Why: the estimate's
+    /// motion from frame to frame is off by centimetres (the simulated GPS's white noise: a
+    /// median of 8 cm, up to 0.3 m, at the mission's 20 Hz), so a frame placed by it, and
+    /// every keyframe tracked from it, shifts the map by that much; the next frame usually
+    /// tracks again.
+    pub max_dropped_frames: usize,
+    /// For frames given a state estimate ([`ModelTracker::process`]): how far their tracked
+    /// rotation may stray from the estimator's before they are dropped. Default `None` (no
+    /// gate): its scale is the estimator's, which only the caller knows.
+    pub estimate_rotation_gate: Option<EstimateRotationGate>,
+}
+
+/// The largest disagreement, degrees, between a frame's tracked rotation since the previous
+/// frame and the state estimator's: `min_deg + deg_per_sqrt_s · √Δt`, where Δt is the time
+/// between the two frames' timestamps, seconds (the estimator's attitude error walks like a
+/// random walk over short times, so its relative rotation is off by a σ growing as √Δt).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EstimateRotationGate {
+    /// Allowed at any Δt (the odometry's own error, and the estimator's noise between
+    /// frames taken at once), degrees.
+    pub min_deg: f64,
+    /// Allowed per √second between the frames, degrees/√s.
+    pub deg_per_sqrt_s: f64,
+}
+
+impl EstimateRotationGate {
+    /// The largest disagreement allowed between frames `dt_s` seconds apart, degrees (a
+    /// negative or non-finite `dt_s` counts as 0).
+    pub fn tolerance_deg(&self, dt_s: f64) -> f64 {
+        let dt_s = if dt_s.is_finite() { dt_s.max(0.0) } else { 0.0 };
+        self.min_deg + self.deg_per_sqrt_s * dt_s.sqrt()
+    }
+
+    fn validate(&self) -> Result<(), MappingError> {
+        for (field, value) in [
+            ("estimate_rotation_gate.min_deg", self.min_deg),
+            ("estimate_rotation_gate.deg_per_sqrt_s", self.deg_per_sqrt_s),
+        ] {
+            if !(value.is_finite() && value >= 0.0) {
+                return Err(MappingError::InvalidConfig {
+                    field,
+                    reason: "must be finite and not negative",
+                });
+            }
+        }
+        Ok(())
+    }
+}
+
+/// A frame dropped by the [`EstimateRotationGate`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EstimateDisagreement {
+    /// Angle between the tracked and the estimated rotation since the previous frame, degrees.
+    pub rotation_deg: f64,
+    /// The gate's tolerance for the time between the frames, degrees.
+    pub tolerance_deg: f64,
 }
 
 impl Default for ModelTrackingConfig {
@@ -84,6 +153,8 @@ impl Default for ModelTrackingConfig {
             keyframes: KeyframeConfig::default(),
             fallback_sigma_m: 0.05,
             fallback_sigma_deg: 0.5,
+            max_dropped_frames: 10,
+            estimate_rotation_gate: None,
         }
     }
 }
@@ -101,8 +172,17 @@ pub struct TrackedFrame {
     pub odometry: Option<OdometryResult>,
     /// The odometry failed and the guessed motion was used.
     pub fell_back: bool,
-    /// The frame was fused into the model (false for an unaided frame whose odometry failed).
+    /// The frame was fused into the model (false for an unaided frame whose odometry failed,
+    /// and for a dropped frame).
     pub fused: bool,
+    /// The frame, given a state estimate, was not trusted (its odometry failed, or disagreed
+    /// with the estimate) and was dropped: not fused, not a keyframe, and the tracker is as it
+    /// was before it (see [`ModelTrackingConfig::max_dropped_frames`]). `world_from_camera` is
+    /// then where the estimate's motion puts it, and `odometry` holds the untrusted result.
+    pub dropped: bool,
+    /// The tracked rotation's disagreement with the state estimate, when beyond the
+    /// [`EstimateRotationGate`] (the frame was then dropped, or placed by the estimate).
+    pub disagreement: Option<EstimateDisagreement>,
     /// Why the frame became a keyframe, or `None`.
     pub keyframe: Option<KeyframeReason>,
     /// For a keyframe after the first: the covariance of the tracked motion since the previous
@@ -138,6 +218,10 @@ pub struct ModelTracker {
     previous: Option<Isometry3<f64>>,
     /// The previous frame's state estimate (frames given one).
     previous_estimate: Option<Isometry3<f64>>,
+    /// The previous frame's timestamp, seconds.
+    previous_timestamp_s: Option<f64>,
+    /// Frames dropped since the last one kept.
+    dropped_in_a_row: usize,
     /// The previous frame's motion, `previous_from_current` of the frame before it (the
     /// constant-velocity guess of [`ModelTracker::process_unaided`]).
     last_motion: Isometry3<f64>,
@@ -158,6 +242,9 @@ impl ModelTracker {
         camera.validate().map_err(MappingError::Camera)?;
         config.odometry.validate()?;
         config.keyframes.validate().map_err(MappingError::Camera)?;
+        if let Some(gate) = &config.estimate_rotation_gate {
+            gate.validate()?;
+        }
         for (field, value) in [
             ("fallback_sigma_m", config.fallback_sigma_m),
             ("fallback_sigma_deg", config.fallback_sigma_deg),
@@ -177,6 +264,8 @@ impl ModelTracker {
             volume,
             previous: None,
             previous_estimate: None,
+            previous_timestamp_s: None,
+            dropped_in_a_row: 0,
             last_motion: Isometry3::identity(),
             covariance_since_keyframe: Matrix6::zeros(),
             keyframe: None,
@@ -212,7 +301,9 @@ impl ModelTracker {
             .previous_estimate
             .map(|previous| previous.inverse() * world_from_camera_estimate);
         let tracked = self.process_with_motion(frame, world_from_camera_estimate, motion, true)?;
-        self.previous_estimate = Some(*world_from_camera_estimate);
+        if !tracked.dropped {
+            self.previous_estimate = Some(*world_from_camera_estimate);
+        }
         Ok(tracked)
     }
 
@@ -274,13 +365,43 @@ impl ModelTracker {
                     }
                 };
                 let ms = started.elapsed().as_secs_f64() * 1e3;
-                let world_from_camera = if result.is_ok() {
+                let disagreement = if result.is_ok() {
+                    self.disagreement(
+                        frame,
+                        &world_from_previous,
+                        &(world_from_reference * result.reference_from_current),
+                        previous_from_current_guess.filter(|_| fuse_on_guess),
+                    )
+                } else {
+                    None
+                };
+                let trusted = result.is_ok() && disagreement.is_none();
+                if !trusted
+                    && fuse_on_guess
+                    && self.dropped_in_a_row < self.config.max_dropped_frames
+                {
+                    self.dropped_in_a_row += 1;
+                    self.frames += 1;
+                    return Ok(TrackedFrame {
+                        index,
+                        world_from_camera: renormalized(&(world_from_previous * motion)),
+                        odometry: Some(result),
+                        fell_back: false,
+                        fused: false,
+                        dropped: true,
+                        disagreement,
+                        keyframe: None,
+                        keyframe_covariance: None,
+                        odometry_ms: Some(ms),
+                        integrate_ms: 0.0,
+                    });
+                }
+                let world_from_camera = if trusted {
                     world_from_reference * result.reference_from_current
                 } else {
                     world_from_previous * motion
                 };
-                let covariance = result
-                    .is_ok()
+                let covariance = trusted
                     .then(|| result.information.try_inverse())
                     .flatten()
                     .filter(|c| c.iter().all(|v| v.is_finite()));
@@ -302,11 +423,10 @@ impl ModelTracker {
                         &motion,
                     ),
                 };
-                let fell_back = !result.is_ok();
                 (
                     renormalized(&world_from_camera),
-                    Some(result),
-                    fell_back,
+                    Some((result, disagreement)),
+                    !trusted,
                     Some(ms),
                 )
             }
@@ -341,17 +461,48 @@ impl ModelTracker {
             self.last_motion = renormalized(&(world_from_previous.inverse() * world_from_camera));
         }
         self.previous = Some(world_from_camera);
+        self.previous_timestamp_s = Some(frame.timestamp_s);
+        self.dropped_in_a_row = 0;
         self.frames += 1;
+        let (odometry, disagreement) = odometry.unzip();
         Ok(TrackedFrame {
             index,
             world_from_camera,
             odometry,
             fell_back,
             fused,
+            dropped: false,
+            disagreement: disagreement.flatten(),
             keyframe,
             keyframe_covariance,
             odometry_ms,
             integrate_ms,
+        })
+    }
+
+    /// How far the tracked motion since the previous frame turns from the state estimate's
+    /// `previous_from_current_estimate` (`None`: no estimate, or no gate), when beyond the
+    /// gate's tolerance for the time between the frames.
+    fn disagreement(
+        &self,
+        frame: &RgbdFrame,
+        world_from_previous: &Isometry3<f64>,
+        world_from_camera: &Isometry3<f64>,
+        previous_from_current_estimate: Option<Isometry3<f64>>,
+    ) -> Option<EstimateDisagreement> {
+        let gate = self.config.estimate_rotation_gate?;
+        let estimated = previous_from_current_estimate?;
+        let tracked = world_from_previous.inverse() * world_from_camera;
+        let rotation_deg = (estimated.rotation.inverse() * tracked.rotation)
+            .angle()
+            .to_degrees();
+        let dt_s = self
+            .previous_timestamp_s
+            .map_or(0.0, |previous| frame.timestamp_s - previous);
+        let tolerance_deg = gate.tolerance_deg(dt_s);
+        (rotation_deg > tolerance_deg).then_some(EstimateDisagreement {
+            rotation_deg,
+            tolerance_deg,
         })
     }
 
@@ -441,7 +592,7 @@ mod tests {
     fn an_unaided_frame_that_fails_is_not_fused() {
         // A textured wall at 2 m, then a frame that sees depth only in a 10×10 patch at 1 m:
         // too few correspondences, so the odometry fails. Unaided, the guessed pose has nothing
-        // behind it and the frame is skipped; with a state estimate it is fused there.
+        // behind it and the frame is skipped.
         let camera = PinholeCamera::new(100.0, 100.0, 79.5, 59.5, 160, 120).unwrap();
         let pixels = || (0..120u32).flat_map(|v| (0..160u32).map(move |u| (u, v)));
         let rgb = crate::image::Image::from_vec(
@@ -492,11 +643,26 @@ mod tests {
         assert!(tracked.fell_back && !tracked.fused);
         assert_eq!(unaided.volume().stats().blocks, blocks);
 
-        let mut aided = ModelTracker::new(camera, config).unwrap();
+        // With a state estimate, the failed frame is dropped while fewer than
+        // `max_dropped_frames` were dropped in a row, then fused where the estimate puts it.
+        let mut aided = ModelTracker::new(camera, config.clone()).unwrap();
         aided.process(&wall, &first).unwrap();
         let tracked = aided.process(&stray, &first).unwrap();
-        assert!(tracked.fell_back && tracked.fused);
-        assert!(aided.volume().stats().blocks > blocks);
+        assert!(tracked.dropped && !tracked.fell_back && !tracked.fused);
+        assert_eq!(aided.volume().stats().blocks, blocks);
+
+        let mut placed = ModelTracker::new(
+            camera,
+            ModelTrackingConfig {
+                max_dropped_frames: 0,
+                ..config
+            },
+        )
+        .unwrap();
+        placed.process(&wall, &first).unwrap();
+        let tracked = placed.process(&stray, &first).unwrap();
+        assert!(tracked.fell_back && tracked.fused && !tracked.dropped);
+        assert!(placed.volume().stats().blocks > blocks);
     }
 
     #[test]
