@@ -327,6 +327,7 @@ impl MappingSession {
             odometry: m.odometry.clone(),
             keyframes: m.keyframes,
             estimate_rotation_gate: m.estimate_rotation_gate(&config.estimator),
+            max_dropped_frames: (m.max_dropped_s * config.map_camera_rate_hz).round() as usize,
             ..ModelTrackingConfig::default()
         };
         Ok(Self {
