@@ -81,11 +81,11 @@ pub struct ModelTrackingConfig {
     /// For frames given a state estimate ([`ModelTracker::process`]): up to this many in a row
     /// whose odometry failed or disagreed with the estimate are dropped (not fused, not
     /// keyframes) rather than placed by the estimate's motion; the next one is placed by the
-    /// estimate, fused, and becomes the new keyframe reference. Default 10. Why: the estimate's
-    /// motion from frame to frame is off by centimetres (the simulated GPS's white noise: a
-    /// median of 8 cm, up to 0.3 m, at the mission's 20 Hz), so a frame placed by it, and
-    /// every keyframe tracked from it, shifts the map by that much; the next frame usually
-    /// tracks again.
+    /// estimate, fused, and becomes the new keyframe reference. Default 10 (the mission sets
+    /// it from `mapping.max_dropped_s`). Why: the estimate's motion from frame to frame is off
+    /// by centimetres (the simulated GPS's white noise: a median of 8 cm, up to 0.3 m, at the
+    /// mission's 20 Hz), so a frame placed by it, and every keyframe tracked from it, shifts
+    /// the map by that much; the next frame usually tracks again.
     pub max_dropped_frames: usize,
     /// For frames given a state estimate ([`ModelTracker::process`]): how far their tracked
     /// rotation may stray from the estimator's before they are dropped. Default `None` (no
@@ -131,7 +131,8 @@ impl EstimateRotationGate {
     }
 }
 
-/// A frame dropped by the [`EstimateRotationGate`].
+/// A frame's tracked rotation beyond the [`EstimateRotationGate`] (the frame is then dropped,
+/// or, past [`ModelTrackingConfig::max_dropped_frames`], placed by the estimate).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct EstimateDisagreement {
     /// Angle between the tracked and the estimated rotation since the previous frame, degrees.
