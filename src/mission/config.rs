@@ -310,7 +310,7 @@ pub struct MappingConfig {
     /// this long in a row, seconds (at `map_camera_rate_hz`); the next is placed by the
     /// estimate's motion and re-anchors the keyframes. Default 1.0: on the default world's
     /// seed 35 (300° localization, 1.5 m exit), the vehicle's attitude swung by 30° and back
-    /// within 0.4 s at a ring's start, the odometry failed for 0.6 s, and a 0.6 s limit placed
+    /// within 0.4 s on the base ring, the odometry failed for 0.6 s, and a 0.6 s limit placed
     /// the next frame by the estimate, 12 cm off, which then carried into the map.
     pub max_dropped_s: f64,
 }
