@@ -691,17 +691,8 @@ fn fuse_with_odometry(
         .with_context(|| format!("tracking frame {i}"))?;
         integrate_ms.push(tracked.integrate_ms);
         odometry_ms.extend(tracked.odometry_ms);
-        let failure = tracked.odometry.as_ref().and_then(|o| o.failure.as_ref());
-        let reason = match (failure, &tracked.disagreement) {
-            (Some(failure), _) => Some(failure.to_string()),
-            (None, Some(d)) => Some(format!(
-                "the tracked rotation strays {:.2}° from the state estimate's (tolerance {:.2}°)",
-                d.rotation_deg, d.tolerance_deg
-            )),
-            (None, None) => None,
-        };
         if (tracked.fell_back || tracked.dropped)
-            && let Some(reason) = reason
+            && let Some(reason) = tracked.distrust_reason()
         {
             tracing::debug!(frame = i, %reason, "odometry not trusted; using the guessed motion");
             // Unaided (no estimate.txt), a failed frame is skipped, not fused at a guess; with

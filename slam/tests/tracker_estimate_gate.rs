@@ -50,7 +50,12 @@ fn frames() -> (PinholeCamera, Vec<(RgbdFrame, Isometry3<f64>)>, Roi) {
     (camera, frames, roi)
 }
 
-fn tracker(camera: PinholeCamera, roi: Roi, gate: Option<EstimateRotationGate>) -> ModelTracker {
+fn tracker(
+    camera: PinholeCamera,
+    roi: Roi,
+    gate: Option<EstimateRotationGate>,
+    max_dropped_frames: usize,
+) -> ModelTracker {
     let config = ModelTrackingConfig {
         tsdf: TsdfConfig {
             voxel_size_m: 0.02,
@@ -58,6 +63,7 @@ fn tracker(camera: PinholeCamera, roi: Roi, gate: Option<EstimateRotationGate>) 
             ..TsdfConfig::default()
         },
         estimate_rotation_gate: gate,
+        max_dropped_frames,
         ..ModelTrackingConfig::default()
     };
     ModelTracker::new(camera, config).unwrap()
@@ -75,7 +81,7 @@ fn angle_deg(a: &Isometry3<f64>, b: &Isometry3<f64>) -> f64 {
 #[test]
 fn a_frame_that_strays_from_the_estimate_is_dropped_and_tracking_goes_on() {
     let (camera, frames, roi) = frames();
-    let mut gated = tracker(camera, roi, Some(GATE));
+    let mut gated = tracker(camera, roi, Some(GATE), 10);
     for (k, (frame, truth)) in frames.iter().enumerate() {
         let blocks = gated.volume().stats().blocks;
         let tracked = gated.process(frame, truth).unwrap();
@@ -84,6 +90,8 @@ fn a_frame_that_strays_from_the_estimate_is_dropped_and_tracking_goes_on() {
             assert!(tracked.dropped && !tracked.fused && tracked.keyframe.is_none());
             assert!((d.rotation_deg - TURN_DEG).abs() < 0.5, "{d:?}");
             assert!(d.tolerance_deg < 2.0, "{d:?}");
+            let reason = tracked.distrust_reason().unwrap();
+            assert!(reason.contains("strays"), "{reason}");
             assert_eq!(gated.volume().stats().blocks, blocks);
         } else {
             assert!(!tracked.dropped && tracked.fused, "frame {k}: {tracked:?}");
@@ -97,7 +105,7 @@ fn a_frame_that_strays_from_the_estimate_is_dropped_and_tracking_goes_on() {
     }
 
     // Without the gate the odd frame is fused where its image puts it, 4° off the estimate.
-    let mut ungated = tracker(camera, roi, None);
+    let mut ungated = tracker(camera, roi, None, 10);
     for (k, (frame, truth)) in frames.iter().enumerate().take(ODD + 1) {
         let tracked = ungated.process(frame, truth).unwrap();
         if k == ODD {
@@ -110,21 +118,9 @@ fn a_frame_that_strays_from_the_estimate_is_dropped_and_tracking_goes_on() {
 #[test]
 fn frames_beyond_the_drop_limit_are_placed_by_the_estimate() {
     let (camera, frames, roi) = frames();
-    let mut tracker = {
-        let config = ModelTrackingConfig {
-            tsdf: TsdfConfig {
-                voxel_size_m: 0.02,
-                roi: Some(roi),
-                ..TsdfConfig::default()
-            },
-            estimate_rotation_gate: Some(GATE),
-            max_dropped_frames: 0,
-            ..ModelTrackingConfig::default()
-        };
-        ModelTracker::new(camera, config).unwrap()
-    };
+    let mut placed = tracker(camera, roi, Some(GATE), 0);
     for (k, (frame, truth)) in frames.iter().enumerate().take(ODD + 1) {
-        let tracked = tracker.process(frame, truth).unwrap();
+        let tracked = placed.process(frame, truth).unwrap();
         if k == ODD {
             assert!(tracked.disagreement.is_some());
             assert!(tracked.fell_back && tracked.fused && !tracked.dropped);

@@ -145,6 +145,7 @@ impl MissionConfig {
                 "mapping.estimate_gate_min_deg",
                 self.mapping.estimate_gate_min_deg,
             ),
+            ("mapping.max_dropped_s", self.mapping.max_dropped_s),
         ] {
             if !(value.is_finite() && value >= 0.0) {
                 return Err(format!("`{key}` = {value}: must be a number ≥ 0"));
@@ -378,6 +379,10 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(err.contains("coverage.threshold"), "{err}");
+        let err = MissionConfig::from_toml_str("[mapping]\nmax_dropped_s = -1.0\n", "m.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("mapping.max_dropped_s"), "{err}");
     }
 
     /// Every table of the configuration, however deep (`[planning.min_snap]`, …), refuses a key

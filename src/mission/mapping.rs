@@ -437,17 +437,7 @@ impl MappingSession {
                 "target {}: frame at {:.2} s dropped: {}",
                 self.target_id,
                 frame.timestamp_s,
-                match (
-                    &tracked.disagreement,
-                    tracked.odometry.as_ref().and_then(|o| o.failure.as_ref())
-                ) {
-                    (Some(d), _) => format!(
-                        "its tracked rotation strays {:.2}° from the state estimate's (tolerance {:.2}°)",
-                        d.rotation_deg, d.tolerance_deg
-                    ),
-                    (None, Some(f)) => format!("the odometry failed ({f})"),
-                    (None, None) => "untrusted".into(),
-                }
+                tracked.distrust_reason().unwrap_or_default()
             );
             return Ok(());
         }

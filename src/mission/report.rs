@@ -36,7 +36,7 @@ pub struct TargetReport {
     pub frames_mapped: usize,
     /// Frames seen while mapping but dropped: their odometry failed or strayed from the state
     /// estimate (`mapping.estimate_gate_sigmas`), and placing them by the estimate would have
-    /// shifted the map (see [`scarp_slam::mapping::ModelTrackingConfig::max_dropped_frames`]).
+    /// shifted the map (for up to `mapping.max_dropped_s` in a row).
     #[serde(default)]
     pub frames_dropped: usize,
     /// Keyframes in its bundle adjustment.

@@ -197,6 +197,24 @@ pub struct TrackedFrame {
     pub integrate_ms: f64,
 }
 
+impl TrackedFrame {
+    /// Why the frame was not trusted (dropped, or placed by the guess): the odometry's failure,
+    /// or its disagreement with the state estimate; `None` for a trusted frame.
+    pub fn distrust_reason(&self) -> Option<String> {
+        match (
+            self.odometry.as_ref().and_then(|o| o.failure.as_ref()),
+            &self.disagreement,
+        ) {
+            (Some(failure), _) => Some(failure.to_string()),
+            (None, Some(d)) => Some(format!(
+                "the tracked rotation strays {:.2}° from the state estimate's (tolerance {:.2}°)",
+                d.rotation_deg, d.tolerance_deg
+            )),
+            (None, None) => None,
+        }
+    }
+}
+
 /// Frame-to-model RGBD tracking and TSDF fusion with its own poses.
 ///
 /// ```no_run
@@ -340,8 +358,10 @@ impl ModelTracker {
         let index = self.frames;
         let odometry_config = &self.config.odometry;
         let pyramid = frame_pyramid(frame, odometry_config.levels);
-        let (world_from_camera, odometry, fell_back, odometry_ms) = match self.previous {
-            None => (*world_from_first_camera, None, false, None),
+        let (world_from_camera, odometry, disagreement, fell_back, odometry_ms) = match self
+            .previous
+        {
+            None => (*world_from_first_camera, None, None, false, None),
             Some(world_from_previous) => {
                 let started = Instant::now();
                 let motion = previous_from_current_guess.unwrap_or_else(Isometry3::identity);
@@ -366,11 +386,12 @@ impl ModelTracker {
                     }
                 };
                 let ms = started.elapsed().as_secs_f64() * 1e3;
+                let world_from_tracked = world_from_reference * result.reference_from_current;
                 let disagreement = if result.is_ok() {
                     self.disagreement(
                         frame,
                         &world_from_previous,
-                        &(world_from_reference * result.reference_from_current),
+                        &world_from_tracked,
                         previous_from_current_guess.filter(|_| fuse_on_guess),
                     )
                 } else {
@@ -398,7 +419,7 @@ impl ModelTracker {
                     });
                 }
                 let world_from_camera = if trusted {
-                    world_from_reference * result.reference_from_current
+                    world_from_tracked
                 } else {
                     world_from_previous * motion
                 };
@@ -426,7 +447,8 @@ impl ModelTracker {
                 };
                 (
                     renormalized(&world_from_camera),
-                    Some((result, disagreement)),
+                    Some(result),
+                    disagreement,
                     !trusted,
                     Some(ms),
                 )
@@ -465,7 +487,6 @@ impl ModelTracker {
         self.previous_timestamp_s = Some(frame.timestamp_s);
         self.dropped_in_a_row = 0;
         self.frames += 1;
-        let (odometry, disagreement) = odometry.unzip();
         Ok(TrackedFrame {
             index,
             world_from_camera,
@@ -473,7 +494,7 @@ impl ModelTracker {
             fell_back,
             fused,
             dropped: false,
-            disagreement: disagreement.flatten(),
+            disagreement,
             keyframe,
             keyframe_covariance,
             odometry_ms,
