@@ -37,8 +37,8 @@ pub struct CoverageConfig {
     pub max_incidence_deg: f64,
     /// Farthest accepted depth along the camera z axis, metres. Default 6.
     pub max_depth_m: f64,
-    /// How far round the cylinder's axis the camera must have flown (net azimuth, either
-    /// way), degrees. 345 asks for the first ring all round, less the frames before the map is
+    /// How far round the cylinder's axis the camera must have flown (the span of its
+    /// azimuth, [`CylinderCoverage::sweep_deg`]), degrees. 345 asks for the first ring all round, less the frames before the map is
     /// anchored. Default 0 (the cells alone decide) until a paired campaign decides: on two
     /// paired library runs 345 halved the unseen-base refusals (4 → 2) and mapped as many
     /// targets (4 of 8), but the default mission's seed 0, its flight shifted in time, lost a
@@ -72,9 +72,10 @@ pub struct CylinderCoverage {
     seen: Vec<bool>,
     /// The cylinder's axis (xy, world metres), for the sweep.
     axis_xy: [f64; 2],
-    /// Net azimuth flown round the axis since the first view, radians (counter-clockwise
-    /// positive), and the largest magnitude it reached.
+    /// Azimuth round the axis since the first view, unwrapped, radians (counter-clockwise
+    /// positive), and the least and greatest values it took: the sweep is their difference.
     sweep_rad: f64,
+    min_sweep_rad: f64,
     max_sweep_rad: f64,
     /// Azimuth of the last view round the axis, radians.
     last_azimuth_rad: Option<f64>,
@@ -108,6 +109,7 @@ impl CylinderCoverage {
             side_cells,
             axis_xy: [cylinder.center_x_m, cylinder.center_y_m],
             sweep_rad: 0.0,
+            min_sweep_rad: 0.0,
             max_sweep_rad: 0.0,
             last_azimuth_rad: None,
         }
@@ -123,7 +125,8 @@ impl CylinderCoverage {
             // Views come a fraction of a degree apart: the short way round is the way flown.
             use std::f64::consts::{PI, TAU};
             self.sweep_rad += (azimuth - last + PI).rem_euclid(TAU) - PI;
-            self.max_sweep_rad = self.max_sweep_rad.max(self.sweep_rad.abs());
+            self.min_sweep_rad = self.min_sweep_rad.min(self.sweep_rad);
+            self.max_sweep_rad = self.max_sweep_rad.max(self.sweep_rad);
         }
         self.last_azimuth_rad = Some(azimuth);
         let cos_limit = self.config.max_incidence_deg.to_radians().cos();
@@ -165,9 +168,16 @@ impl CylinderCoverage {
         seen_fraction(self.seen[self.side_cells..].iter())
     }
 
-    /// The largest net azimuth flown round the axis so far, degrees.
+    /// How far round the axis the views have reached, degrees: the span of the unwrapped
+    /// azimuth, from the least to the greatest it has taken. 360 or more once a ring has been
+    /// flown all round, wherever the first view was.
+    ///
+    /// Why a span and not the net azimuth from the first view: mapping starts on the approach,
+    /// whose descent swings the azimuth one way and back before the ring begins. Measured
+    /// from the first view, a full base ring then read 337° (default world, seed 39, rock 3):
+    /// short of 345, so the flight flew every ring and never completed.
     pub fn sweep_deg(&self) -> f64 {
-        self.max_sweep_rad.to_degrees()
+        (self.max_sweep_rad - self.min_sweep_rad).to_degrees()
     }
 
     /// Whether the side's seen fraction, and the lid's, reached the threshold, and the camera
@@ -252,6 +262,18 @@ mod tests {
         // Turning back (the next ring alternates direction) keeps the largest sweep reached.
         coverage.observe(&camera, &view(450.0));
         assert!((coverage.sweep_deg() - 360.0).abs() < 1e-6);
+        // An approach that swings 30° one way and 50° back before the ring begins: the ring
+        // all round is 360° of span, though it ends 330° from the first view.
+        let mut approached = CylinderCoverage::new(&cylinder(), all_round);
+        for deg in (0..=30).chain((-20..30).rev()).chain(-18..=340) {
+            approached.observe(&camera, &view(f64::from(deg)));
+        }
+        assert!(
+            (approached.sweep_deg() - 360.0).abs() < 1e-6,
+            "{}",
+            approached.sweep_deg()
+        );
+        assert!(approached.is_complete());
         // Without the sweep requirement, the cells alone decided after two thirds of a ring.
         let mut cells_only = CylinderCoverage::new(&cylinder(), CoverageConfig::default());
         for step in 0..=125 {
