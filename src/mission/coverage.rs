@@ -189,6 +189,40 @@ impl CylinderCoverage {
     }
 }
 
+impl CylinderCoverage {
+    /// What keeps the coverage from complete, in words (`None` once [`Self::is_complete`]).
+    pub fn shortfall(&self) -> Option<String> {
+        let threshold = self.config.threshold;
+        let side = seen_fraction(self.seen[..self.side_cells].iter());
+        let mut missing = Vec::new();
+        if side < threshold {
+            missing.push(format!("side {side:.2} of its cells seen"));
+        }
+        if self.top_fraction() < threshold {
+            missing.push(format!("top {:.2} of its cells seen", self.top_fraction()));
+        }
+        if missing.is_empty() && self.sweep_deg() >= self.config.min_sweep_deg {
+            return None;
+        }
+        let mut words = if missing.is_empty() {
+            String::new()
+        } else {
+            format!("{} (threshold {threshold:.2})", missing.join(", "))
+        };
+        if self.sweep_deg() < self.config.min_sweep_deg {
+            if !words.is_empty() {
+                words.push_str("; ");
+            }
+            words.push_str(&format!(
+                "the camera went {:.0}° round the axis (coverage.min_sweep_deg {:.0})",
+                self.sweep_deg(),
+                self.config.min_sweep_deg
+            ));
+        }
+        Some(words)
+    }
+}
+
 /// Fraction of `true` in `seen`; 1 when empty (nothing left to see).
 fn seen_fraction<'a>(seen: impl Iterator<Item = &'a bool>) -> f64 {
     let (hit, all) = seen.fold((0usize, 0usize), |(h, a), &s| (h + usize::from(s), a + 1));
@@ -254,11 +288,17 @@ mod tests {
             !coverage.is_complete(),
             "two thirds of a ring are not all round"
         );
+        let shortfall = coverage.shortfall().unwrap();
+        assert!(
+            shortfall.starts_with("the camera went 250° round the axis"),
+            "{shortfall}"
+        );
         for step in 126..=180 {
             coverage.observe(&camera, &view(100.0 + 2.0 * f64::from(step)));
         }
         assert!((coverage.sweep_deg() - 360.0).abs() < 1e-6);
         assert!(coverage.is_complete());
+        assert_eq!(coverage.shortfall(), None);
         // Turning back (the next ring alternates direction) keeps the largest sweep reached.
         coverage.observe(&camera, &view(450.0));
         assert!((coverage.sweep_deg() - 360.0).abs() < 1e-6);

@@ -665,11 +665,10 @@ pub fn finish_target(
             mapped = false;
         }
     }
-    if !complete && coverage_required && report.error.is_none() {
-        report.error = Some(format!(
-            "coverage {:.2} below the threshold {:.2}",
-            report.coverage, config.coverage.threshold
-        ));
+    if let Some(shortfall) = session.coverage.shortfall().filter(|_| coverage_required)
+        && report.error.is_none()
+    {
+        report.error = Some(format!("coverage: {shortfall}"));
     }
     write_mesh(dir.join("mesh.ply"), &mesh, PlyEncoding::BinaryLittleEndian)?;
     write_keyframe_trajectories(
