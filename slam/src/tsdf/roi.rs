@@ -147,6 +147,34 @@ impl Roi {
         }
     }
 
+    /// The region's centre (world metres): the box's middle, or the middle of the cylinder's
+    /// axis.
+    pub fn center(&self) -> nalgebra::Point3<f64> {
+        let (min, max) = self.bounding_box();
+        nalgebra::Point3::from(std::array::from_fn(|a| 0.5 * (min[a] + max[a])))
+    }
+
+    /// The same region moved by `offset_m` (world metres); a cylinder stays vertical.
+    pub fn translated(&self, offset_m: &nalgebra::Vector3<f64>) -> Roi {
+        match *self {
+            Roi::Box { min, max } => Roi::Box {
+                min: std::array::from_fn(|a| min[a] + offset_m[a]),
+                max: std::array::from_fn(|a| max[a] + offset_m[a]),
+            },
+            Roi::Cylinder {
+                center_xy,
+                z_min,
+                z_max,
+                radius_m,
+            } => Roi::Cylinder {
+                center_xy: [center_xy[0] + offset_m.x, center_xy[1] + offset_m.y],
+                z_min: z_min + offset_m.z,
+                z_max: z_max + offset_m.z,
+                radius_m,
+            },
+        }
+    }
+
     /// The smallest axis-aligned box `(min, max)` (metres) holding the region.
     pub fn bounding_box(&self) -> ([f64; 3], [f64; 3]) {
         match *self {
