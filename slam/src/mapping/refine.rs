@@ -100,11 +100,10 @@ pub struct RefineConfig {
     /// odometry failed within the stretch.
     ///
     /// Why not less: the adjustment's own corrections differ from keyframe to keyframe by a
-    /// median of 0.5–2 mm on mission flights. At 5 mm (the earlier default) two stretches of a
-    /// full base ring were left out whose ATE the adjustment had lowered (1.9 → 1.3 mm): the
-    /// mesh lost a patch of the rock's side that only those frames saw, F@2cm fell from 0.968
-    /// to 0.905 and α_min from 12.9° (truth) to 8.7° (default world, seed 39, rock 3, with
-    /// `coverage.min_sweep_deg` 345).
+    /// median of 0.5–2 mm on mission flights, and interpolated (not one keyframe's) a frame is
+    /// placed within half the change. At 5 mm (the earlier default) two stretches of a base
+    /// ring were left out on a flight whose keyframe ATE the adjustment had lowered from 1.9 to
+    /// 1.3 mm (default world, seed 39, rock 3, with `coverage.min_sweep_deg` 345).
     pub between_max_correction_change_m: f64,
     /// ... and at most this rotation, degrees. Default 1.
     pub between_max_correction_change_deg: f64,
