@@ -52,7 +52,8 @@ pub struct TargetReport {
     pub coverage: f64,
     /// Fraction of the cylinder's bottom band seen (the base).
     pub base_coverage: f64,
-    /// Net azimuth the mapping flight went round the cylinder's axis, degrees.
+    /// How far round the cylinder's axis the mapping views reached, degrees: the span of their
+    /// unwrapped azimuth ([`super::coverage::CylinderCoverage::sweep_deg`]).
     #[serde(default)]
     pub sweep_deg: f64,
     /// Mesh size.
