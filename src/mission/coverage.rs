@@ -187,43 +187,38 @@ impl CylinderCoverage {
     /// Whether the side's seen fraction, and the lid's, reached the threshold, and the camera
     /// went [`CoverageConfig::min_sweep_deg`] round the axis.
     pub fn is_complete(&self) -> bool {
-        seen_fraction(self.seen[..self.side_cells].iter()) >= self.config.threshold
+        self.side_fraction() >= self.config.threshold
             && self.top_fraction() >= self.config.threshold
             && self.sweep_deg() >= self.config.min_sweep_deg
     }
-}
 
-impl CylinderCoverage {
     /// What keeps the coverage from complete, in words (`None` once [`Self::is_complete`]).
     pub fn shortfall(&self) -> Option<String> {
-        let threshold = self.config.threshold;
-        let side = seen_fraction(self.seen[..self.side_cells].iter());
-        let mut missing = Vec::new();
-        if side < threshold {
-            missing.push(format!("side {side:.2} of its cells seen"));
-        }
-        if self.top_fraction() < threshold {
-            missing.push(format!("top {:.2} of its cells seen", self.top_fraction()));
-        }
-        if missing.is_empty() && self.sweep_deg() >= self.config.min_sweep_deg {
+        if self.is_complete() {
             return None;
         }
-        let mut words = if missing.is_empty() {
-            String::new()
-        } else {
-            format!("{} (threshold {threshold:.2})", missing.join(", "))
-        };
-        if self.sweep_deg() < self.config.min_sweep_deg {
-            if !words.is_empty() {
-                words.push_str("; ");
+        let threshold = self.config.threshold;
+        let mut missing = Vec::new();
+        for (part, fraction) in [("side", self.side_fraction()), ("top", self.top_fraction())] {
+            if fraction < threshold {
+                missing.push(format!(
+                    "{part} {fraction:.2} of its cells seen (threshold {threshold:.2})"
+                ));
             }
-            words.push_str(&format!(
+        }
+        if self.sweep_deg() < self.config.min_sweep_deg {
+            missing.push(format!(
                 "the camera went {:.0}° round the axis (coverage.min_sweep_deg {:.0})",
                 self.sweep_deg(),
                 self.config.min_sweep_deg
             ));
         }
-        Some(words)
+        Some(missing.join("; "))
+    }
+
+    /// Fraction of the side's cells seen.
+    fn side_fraction(&self) -> f64 {
+        seen_fraction(self.seen[..self.side_cells].iter())
     }
 }
 

@@ -592,7 +592,7 @@ pub fn finish_target(
     report.base_coverage = session.coverage.bottom_fraction();
     report.sweep_deg = session.coverage.sweep_deg();
     report.keyframes = session.stored.len();
-    let complete = session.coverage.is_complete();
+    let shortfall = session.coverage.shortfall();
     let stored = session.stored;
     if stored.len() < 3 {
         report.error = Some(format!("only {} frames were mapped", stored.len()));
@@ -648,7 +648,7 @@ pub fn finish_target(
     // its contact from the basal profile, close it and analyse it.
     let fragility = analyze_scan(&mesh, &config.fragility).map(|(_, analysis)| analysis);
     let coverage_required = session.coverage_required;
-    let mut mapped = complete || !coverage_required;
+    let mut mapped = shortfall.is_none() || !coverage_required;
     match &fragility {
         Ok(analysis) => {
             let r = &analysis.report;
@@ -665,7 +665,7 @@ pub fn finish_target(
             mapped = false;
         }
     }
-    if let Some(shortfall) = session.coverage.shortfall().filter(|_| coverage_required)
+    if let Some(shortfall) = shortfall.filter(|_| coverage_required)
         && report.error.is_none()
     {
         report.error = Some(format!("coverage: {shortfall}"));

@@ -205,11 +205,8 @@ impl KeyframeSet {
         }
         let mut order = Vec::with_capacity(self.frames.len() + self.between_frames.len());
         let mut between = self.between_frames.iter().peekable();
-        let corrections: Vec<Isometry3<f64>> = keyframe_poses
-            .iter()
-            .zip(&self.world_from_camera_odometry)
-            .map(|(refined, odometry)| refined * odometry.inverse())
-            .collect();
+        let corrections: Vec<Isometry3<f64>> =
+            corrections(&self.world_from_camera_odometry, keyframe_poses).collect();
         for (k, (frame, pose)) in self.frames.iter().zip(keyframe_poses).enumerate() {
             order.push((frame, *pose));
             let next = corrections
@@ -257,13 +254,23 @@ fn roi_after_adjustment(roi: &Roi, odometry: &[Isometry3<f64>], refined: &[Isome
     if n == 0 {
         return *roi;
     }
-    let offset_m = odometry
-        .iter()
-        .zip(refined)
-        .map(|(odometry, refined)| (refined * odometry.inverse()) * center - center)
+    let offset_m = corrections(odometry, refined)
+        .map(|correction| correction * center - center)
         .sum::<Vector3<f64>>()
         / n as f64;
     roi.translated(&offset_m)
+}
+
+/// Each keyframe's correction `refined · odometry⁻¹`: what moves a pose of the odometry's
+/// frame to where the adjustment put it (pairs up to the shorter list).
+fn corrections<'a>(
+    odometry: &'a [Isometry3<f64>],
+    refined: &'a [Isometry3<f64>],
+) -> impl Iterator<Item = Isometry3<f64>> + 'a {
+    odometry
+        .iter()
+        .zip(refined)
+        .map(|(odometry, refined)| refined * odometry.inverse())
 }
 
 /// Where `t_s` lies between `start_s` and `end_s`, in [0, 1]; 0 when the stretch has no
@@ -878,11 +885,7 @@ mod tests {
             );
         }
         // The frame halfway between the keyframes takes half of each one's correction.
-        let corrections: Vec<_> = refined
-            .iter()
-            .zip(&odometry)
-            .map(|(r, o)| r * o.inverse())
-            .collect();
+        let corrections: Vec<_> = corrections(&odometry, &refined).collect();
         let halfway = corrections[0].lerp_slerp(&corrections[1], 0.5) * at(0.5, 0.1);
         assert!((order[1].1.to_homogeneous() - halfway.to_homogeneous()).norm() < 1e-12);
         // Not keyframe 0's correction alone (2 cm along x), nor keyframe 1's (none).
