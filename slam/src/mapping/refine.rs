@@ -100,10 +100,12 @@ pub struct RefineConfig {
     /// odometry failed within the stretch.
     ///
     /// Why not less: the adjustment's own corrections differ from keyframe to keyframe by a
-    /// median of 0.5–2 mm on mission flights, and interpolated (not one keyframe's) a frame is
-    /// placed within half the change. At 5 mm (the earlier default) two stretches of a base
-    /// ring were left out on a flight whose keyframe ATE the adjustment had lowered from 1.9 to
-    /// 1.3 mm (default world, seed 39, rock 3, with `coverage.min_sweep_deg` 345).
+    /// median of 1.0–1.2 mm per target on mission flights, and 0.1–1.7% of stretches exceed
+    /// 5 mm (19 campaigns of sessions 26–29, `docs/campaigns/tools/ba_refusion.py`);
+    /// interpolated (not one keyframe's), a frame is placed within half the change. At 5 mm
+    /// (the earlier default) two stretches of a base ring were left out on a flight whose
+    /// keyframe ATE the adjustment had lowered from 1.9 to 1.3 mm (default world, seed 39,
+    /// rock 3, with `coverage.min_sweep_deg` 345).
     pub between_max_correction_change_m: f64,
     /// ... and at most this rotation, degrees. Default 1.
     pub between_max_correction_change_deg: f64,
