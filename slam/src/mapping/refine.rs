@@ -100,7 +100,7 @@ pub struct RefineConfig {
     /// odometry failed within the stretch.
     ///
     /// Why not less: the adjustment's own corrections differ from keyframe to keyframe by a
-    /// median of 1.0–1.2 mm per target on mission flights, and 0.1–1.7% of stretches exceed
+    /// median of 1.0–1.2 mm per target on mission flights, and 0.2–1.7% of stretches exceed
     /// 5 mm (19 campaigns of sessions 26–29, `docs/campaigns/tools/ba_refusion.py`);
     /// interpolated (not one keyframe's), a frame is placed within half the change. At 5 mm
     /// (the earlier default) two stretches of a base ring were left out on a flight whose
