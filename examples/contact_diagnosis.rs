@@ -9,6 +9,10 @@
 //! cargo run --release --example contact_diagnosis -- --mesh MESH WORLD ROCK_ID LABEL [FRAGILITY_TOML]
 //! ```
 //!
+//! With `PROFILE=LABEL` in the environment (a row's label: `world seed-N rock-id shape`), that
+//! target's per-sector profiles, its true and scanned contact polygons and the support outline
+//! the scan read are printed too.
+//!
 //! With `OUT_DIR`, each run's `mission.json` is written there with its targets' α_min, interval
 //! and true α_min re-analysed (and `world_gt/world.json` beside it), so that
 //! `scarp campaign --tabulate-only --out OUT_DIR` tabulates the new analysis of the same
@@ -243,8 +247,22 @@ fn main() -> Result<()> {
                     );
                 };
                 polygon("truth", &truth);
-                if let Ok((_, a)) = &world_analysis {
+                if let Ok((closed, a)) = &world_analysis {
                     polygon("scan", &a.report);
+                    if let Some(o) = &closed.support_outline {
+                        let xy: Vec<String> = o
+                            .hull(scarp::fragility::scan::OutlineGaps::Interpolated)
+                            .unwrap_or_default()
+                            .iter()
+                            .map(|p| format!("({:.3},{:.3})", p.x, p.y))
+                            .collect();
+                        println!(
+                            "outline: seen {} of {}: {}",
+                            o.seen_sectors(),
+                            o.radius_m.len(),
+                            xy.join(" ")
+                        );
+                    }
                 }
             }
             match (map_alpha, world_analysis) {
