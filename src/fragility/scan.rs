@@ -1851,6 +1851,71 @@ mod tests {
         )
     }
 
+    /// A column 0.3 m across standing 5 cm tall under a lip 0.8 m across, on a pedestal 1.1 m
+    /// across (as a scan, every 5 mm up the column, and the truth as separate solids).
+    fn lipped_scan() -> (TriangleMesh, TriangleMesh, TriangleMesh) {
+        let plane = 1.0;
+        let mut rock = vec![(0.15, plane)];
+        rock.extend((1..=10).map(|i| (0.15, plane + 0.005 * f64::from(i))));
+        rock.extend((0..=90).map(|i| (0.4, plane + 0.051 + 0.01 * f64::from(i))));
+        rock.push((0.2, plane + 0.98));
+        let mut scan = vec![(0.8, 0.0), (0.55, plane)];
+        scan.extend(rock.iter().copied());
+        (
+            without_bottom_cap(revolved(&scan, 48)),
+            revolved(&rock, 48),
+            revolved(&[(0.8, 0.0), (0.55, plane)], 48),
+        )
+    }
+
+    /// Tipped by 11°, the lip 5 cm above the support lands on it long before the centre of
+    /// mass passes over the column's edge: the rock pivots about the lip's edge, and the
+    /// truth's α_min counts it. So must the scan's, or it reads the column's 16° for the lip's
+    /// 38°.
+    #[test]
+    fn a_lip_just_above_the_support_is_where_the_scanned_rock_pivots() {
+        let (scan, rock, pedestal) = lipped_scan();
+        let config = FragilityConfig::default();
+        let truth = analyze(&rock, ContactSpec::Pedestal(&pedestal), &config).unwrap();
+        let (closed, analysis) = analyze_scan(&scan, &config).unwrap();
+        let r = &analysis.report;
+        assert!(
+            (r.alpha_min_deg - truth.alpha_min_deg).abs() < 1.5,
+            "α_min {} vs {}",
+            r.alpha_min_deg,
+            truth.alpha_min_deg
+        );
+        assert!(
+            r.alpha_min_low_deg <= truth.alpha_min_deg
+                && truth.alpha_min_deg <= r.alpha_min_high_deg,
+            "{} not in [{}, {}]",
+            truth.alpha_min_deg,
+            r.alpha_min_low_deg,
+            r.alpha_min_high_deg
+        );
+        // Without landing, the extrapolated contact is the column's (or less).
+        let unlanded = closed
+            .contact_under(&ContactHypothesis::POINT_ESTIMATE)
+            .unwrap();
+        let unlanded_deg = analysis.alpha_min_on_contact(&unlanded).unwrap();
+        assert!(
+            unlanded_deg < truth.alpha_min_deg - 10.0,
+            "{unlanded_deg} vs {}",
+            truth.alpha_min_deg
+        );
+        let landed = closed.landed_contact(
+            &unlanded,
+            &Point3::from(r.center_of_mass),
+            OutlineGaps::Interpolated,
+        );
+        let landed_deg = analysis.alpha_min_on_contact(&landed).unwrap();
+        assert!(
+            (landed_deg - truth.alpha_min_deg).abs() < 1.5,
+            "{landed_deg} vs {}",
+            truth.alpha_min_deg
+        );
+    }
+
     #[test]
     fn the_contact_under_a_filled_wedge_is_extrapolated() {
         let (scan, truth) = wedge_scan();
