@@ -760,9 +760,11 @@ fn score_mesh(
         crop_to_gt_m: Some(0.1),
         ..MeshEvalConfig::default()
     };
+    // The pedestal is true surface too: mapped inside the crop box, it is no error of the rock's.
     let scores = evaluate_mesh_at_taus(
         &aligned,
         &rock.mesh,
+        rock.pedestal.as_ref(),
         &config,
         Some(&visibility),
         &[0.01, 0.02],
