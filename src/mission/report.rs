@@ -84,13 +84,16 @@ pub struct TargetReport {
     /// in the frame the vehicle flies in, metres.
     #[serde(default)]
     pub localization_error_estimate_frame_m: Option<f64>,
-    /// F-score at τ = 1 cm against the visible ground truth.
+    /// F-score at τ = 1 cm against the visible ground truth: the mesh within 10 cm of the true
+    /// rock's box, its precision against the rock and its pedestal (both true surface), its
+    /// recall on the rock's visible surface alone.
     pub fscore_1cm: Option<f64>,
-    /// F-score at τ = 2 cm against the visible ground truth.
+    /// F-score at τ = 2 cm, as [`Self::fscore_1cm`].
     pub fscore_2cm: Option<f64>,
     /// F-score at τ = 2 cm of the keyframes fused at their odometry poses (before BA).
     pub fscore_2cm_before_ba: Option<f64>,
-    /// Mean distance from the mesh to the ground truth, metres.
+    /// Mean distance from the mesh (within 10 cm of the rock's box) to the nearer of the true
+    /// rock and its pedestal, metres.
     pub accuracy_mean_m: Option<f64>,
     /// Mean distance from the visible ground truth to the mesh, metres.
     pub completeness_mean_m: Option<f64>,
