@@ -656,11 +656,13 @@ pub enum ProfileModel {
 /// The profile model of a scan's α_min: it is the median of this model's readings
 /// ([`analyze_closed_scan`]); the other model's readings only widen the interval.
 ///
-/// Why r linear: over 416 mission scans of the three worlds' 10 targets (23 campaigns of
-/// sessions 25–29; session 30's campaign document), the readings of r² linear fell within 2° of
-/// the truth on 66–76% of the scans (median error −0.3° to −0.5°, and −2.3° on the rounded
-/// boulders, whose bases steepen to a wall in their last centimetres), those of r linear on
-/// 88–92%, with the same 4 overestimates above 3°.
+/// Why r linear: over 416 analyses of mission meshes of the three worlds' 10 targets (269
+/// distinct scans, 23 campaigns of sessions 25–29; session 30's campaign document), the readings
+/// of r² linear fell within 2° of the truth on 66–76% (median error −0.2° to −0.5°, and down to
+/// −2.5° on the rounded boulders, whose bases steepen to a wall in their last centimetres),
+/// those of r linear on 88–92%, with 4 overestimates above 3° in either model (5 and 8 in the
+/// two r readings that skip the lowest slab over 4 and 6). On a campaign flown afterwards (45
+/// targets, 35 analysed, one world of four new rocks): 69–77% against 86–91%.
 pub const MEDIAN_MODEL: ProfileModel = ProfileModel::Radius;
 
 /// One way of reading the contact from the basal profile: the model, the slabs fitted and the
