@@ -1400,21 +1400,37 @@ impl ClosedScan {
         com: &Point3<f64>,
         gaps: OutlineGaps,
     ) -> Vec<[f64; 3]> {
+        self.landed_on(contact, &self.scanned_vertices(), com, gaps)
+    }
+
+    /// The scan's own vertices (not the patches' centres), world frame, metres.
+    fn scanned_vertices(&self) -> Vec<Point3<f64>> {
+        self.mesh.positions[..self.scanned_vertex_count]
+            .iter()
+            .map(|p| p.cast::<f64>())
+            .collect()
+    }
+
+    /// [`Self::landed_contact`] with the landing candidates `underside` given, so that many
+    /// readings share one copy of them.
+    fn landed_on(
+        &self,
+        contact: &[[f64; 3]],
+        underside: &[Point3<f64>],
+        com: &Point3<f64>,
+        gaps: OutlineGaps,
+    ) -> Vec<[f64; 3]> {
         let Some(first) = contact.first() else {
             return Vec::new();
         };
         let plane_z = first[2];
         let hull: Vec<Point2<f64>> = contact.iter().map(|p| Point2::new(p[0], p[1])).collect();
-        let underside: Vec<Point3<f64>> = self.mesh.positions[..self.scanned_vertex_count]
-            .iter()
-            .map(|p| p.cast::<f64>())
-            .collect();
         let support = self
             .support_outline
             .as_ref()
             .and_then(|o| o.hull(gaps))
             .unwrap_or_default();
-        super::rocking::landing_hull(&convex_hull_2d(&hull), &underside, &support, plane_z, com)
+        super::rocking::landing_hull(&convex_hull_2d(&hull), underside, &support, plane_z, com)
             .iter()
             .map(|p| [p.x, p.y, plane_z])
             .collect()
@@ -1523,18 +1539,20 @@ pub fn analyze_closed_scan(
     let first = analyse(&closed.contact_polygon, &unperturbed)?;
     let hypotheses = closed.hypotheses(config);
     let com = Point3::from(first.report.center_of_mass);
+    let underside = closed.scanned_vertices();
     // α_min and polygon of each reading, landings included, in the ensemble's order (`None`:
     // no polygon); the centre of mass hardly moves with the plane's millimetres, so the first
     // analysis's serves them all.
     let readings: Vec<Option<(f64, Vec<[f64; 3]>)>> = hypotheses
         .iter()
         .map(|h| {
-            let polygon = closed.landed_contact(&closed.contact_under(h).ok()?, &com, h.gaps);
+            let polygon =
+                closed.landed_on(&closed.contact_under(h).ok()?, &underside, &com, h.gaps);
             Some((first.alpha_min_on_contact(&polygon)?, polygon))
         })
         .collect();
-    // The median reading (α_min, polygon) of the point estimate's model with the outline's
-    // gaps filled as given; a stable sort, so ties keep the ensemble's order and the choice is
+    // The median reading (α_min, polygon) of [`MEDIAN_MODEL`] with the outline's gaps filled
+    // as given; a stable sort, so ties keep the ensemble's order and the choice is
     // deterministic.
     let median_reading = |gaps: OutlineGaps| {
         let mut of_gaps: Vec<&(f64, Vec<[f64; 3]>)> = hypotheses
