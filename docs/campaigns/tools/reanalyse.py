@@ -18,7 +18,8 @@ Prints, over every mesh of a target (mapped or not) that `mission.json` names:
 - with `--models`, per profile model and fit window (the 12 readings at the measured plane of
   `ContactHypothesis::ensemble`), the share of scans read within 2°.
 
-Identical meshes linked into several campaign folders are counted once.
+A scan met in several campaign folders (linked or copied runs) is counted once: an analysed
+one by its label and interval, a refused one by its label and reason.
 """
 import argparse
 import collections
@@ -37,7 +38,7 @@ def run(binary, config, campaign):
 
 
 def parse(text):
-    """Rows (label, truth, α, low, high, readings) of the analysed, (label, truth) of the refused."""
+    """{label: (truth, α, low, high)}, {label: readings} and {label: (truth, reason)}."""
     analysed, readings, refused = {}, {}, {}
     for line in text.splitlines():
         if line.startswith("READINGS"):
@@ -48,7 +49,7 @@ def parse(text):
             analysed[t[1]] = tuple(map(float, t[2:6]))
         elif " refused: " in line and "|" in line:
             label = line.split("|")[0].strip().replace(" ", "_")
-            refused[label] = float(line.split("|")[1].split()[0])
+            refused[label] = (float(line.split("|")[1].split()[0]), line.split(" refused: ")[1])
     return analysed, readings, refused
 
 
@@ -70,8 +71,10 @@ def main():
             if key not in seen:
                 seen.add(key)
                 rows.append((label, truth, alpha, low, high, readings.get(label)))
-        for label, truth in refused.items():
-            rows.append((label, truth, None, None, None, None))
+        for label, (truth, reason) in refused.items():
+            if (label, reason) not in seen:
+                seen.add((label, reason))
+                rows.append((label, truth, None, None, None, None))
     ok = [r for r in rows if r[2] is not None]
     if not ok:
         sys.exit("no analysed target")
