@@ -61,7 +61,7 @@ pub fn render(report: &CampaignReport) -> String {
     }
 
     let _ = writeln!(md, "\n## Totals\n\n| must-show | result |\n|---|---|");
-    let rows: [(String, String); 15] = [
+    let rows: [(String, String); 16] = [
         (
             "runs that completed the mission (not ended by an error or a crash)".into(),
             rate(&t.runs_completed),
@@ -125,6 +125,12 @@ pub fn render(report: &CampaignReport) -> String {
             format!("localization error ≤ {LOCALIZATION_ESTIMATE_FRAME_MAX_M} m, estimate frame"),
             rate(&t.localization_estimate_frame_within_0_5m),
         ),
+        (
+            format!(
+                "catalogue centre ≤ {LOCALIZATION_ESTIMATE_FRAME_MAX_M} m, estimate frame (the scan's centroid once mapped)"
+            ),
+            rate(&t.center_estimate_frame_within_0_5m),
+        ),
     ];
     for (what, result) in rows {
         let _ = writeln!(md, "| {} | {} |", cell(&what), cell(&result));
@@ -153,12 +159,12 @@ pub fn render(report: &CampaignReport) -> String {
 
     let _ = writeln!(
         md,
-        "\n## Targets\n\n| world | seed | rock | shape | status | F@1cm | F@2cm | α_min (°) | truth (°) | error (°) | interval (°) | in | loc. error (m) | est.-frame (m) | min clearance (m) | collisions |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
+        "\n## Targets\n\n| world | seed | rock | shape | status | F@1cm | F@2cm | α_min (°) | truth (°) | error (°) | interval (°) | in | loc. error (m) | est.-frame (m) | centre, est.-frame (m) | min clearance (m) | collisions |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
     );
     for r in &report.targets {
         let _ = writeln!(
             md,
-            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
             r.world,
             r.seed,
             r.rock_id,
@@ -180,6 +186,10 @@ pub fn render(report: &CampaignReport) -> String {
             },
             num(r.localization_error_m, 2),
             num(r.localization_error_estimate_frame_m, 2),
+            match (r.center_error_estimate_frame_m, r.center_source.as_deref()) {
+                (Some(e), Some("scan")) => format!("{e:.2} (scan)"),
+                (e, _) => num(e, 2),
+            },
             num(r.min_clearance_m, 2),
             r.run_collisions.map_or("–".into(), |c| c.to_string()),
         );

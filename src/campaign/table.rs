@@ -121,6 +121,11 @@ pub struct TargetRow {
     pub localization_error_m: Option<f64>,
     /// The same in the frame the vehicle flies in, where reported.
     pub localization_error_estimate_frame_m: Option<f64>,
+    /// Where the catalogue puts the target (`scan` or `localization`), where reported.
+    pub center_source: Option<String>,
+    /// Distance from the catalogue's centre to the true centroid in the frame the vehicle
+    /// flies in, metres, where reported.
+    pub center_error_estimate_frame_m: Option<f64>,
     /// Smallest true clearance: the target's own where reported, else the whole run's, metres.
     pub min_clearance_m: Option<f64>,
     /// Collisions of the whole run.
@@ -219,6 +224,10 @@ pub struct Totals {
     pub localization_within_1m: Rate,
     /// Registered targets localized within 0.5 m in the estimate's frame, where reported.
     pub localization_estimate_frame_within_0_5m: Rate,
+    /// Registered targets whose catalogue centre (the scan's centroid once mapped) lies within
+    /// 0.5 m of the truth in the estimate's frame, where reported.
+    #[serde(default)]
+    pub center_estimate_frame_within_0_5m: Rate,
     /// The distribution of every figure.
     pub figures: Vec<MetricStats>,
 }
@@ -378,6 +387,8 @@ pub fn read_run(
             },
             localization_error_m: f(t, "localization_error_m"),
             localization_error_estimate_frame_m: f(t, "localization_error_estimate_frame_m"),
+            center_source: s(t, "center_source"),
+            center_error_estimate_frame_m: f(t, "center_error_estimate_frame_m"),
             min_clearance_m: f(t, "min_clearance_m").or(run_row.min_clearance_m),
             run_collisions: run_row.collisions,
             error: s(t, "error"),
@@ -473,6 +484,10 @@ pub fn totals(runs: &[RunRow], targets: &[TargetRow]) -> Totals {
         .iter()
         .filter_map(|t| t.localization_error_estimate_frame_m)
         .collect();
+    let center_frame: Vec<f64> = counted
+        .iter()
+        .filter_map(|t| t.center_error_estimate_frame_m)
+        .collect();
     let widths: Vec<f64> = counted
         .iter()
         .filter_map(|t| Some(t.alpha_min_high_deg? - t.alpha_min_low_deg?))
@@ -516,6 +531,13 @@ pub fn totals(runs: &[RunRow], targets: &[TargetRow]) -> Totals {
             counted
                 .iter()
                 .filter_map(|t| Some((t.localization_error_estimate_frame_m?, at(t)))),
+        ),
+        figure(
+            "catalogue centre error, estimate frame (m)",
+            true,
+            counted
+                .iter()
+                .filter_map(|t| Some((t.center_error_estimate_frame_m?, at(t)))),
         ),
         figure(
             "α_min interval width (°)",
@@ -616,6 +638,13 @@ pub fn totals(runs: &[RunRow], targets: &[TargetRow]) -> Totals {
                 .filter(|e| **e <= LOCALIZATION_ESTIMATE_FRAME_MAX_M)
                 .count(),
             estimate_frame.len(),
+        ),
+        center_estimate_frame_within_0_5m: Rate::new(
+            center_frame
+                .iter()
+                .filter(|e| **e <= LOCALIZATION_ESTIMATE_FRAME_MAX_M)
+                .count(),
+            center_frame.len(),
         ),
         figures,
     }

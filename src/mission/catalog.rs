@@ -77,12 +77,15 @@ impl MissionTarget {
             status: TargetStatus::Localizing,
             cylinder: None,
             covariance_xy: None,
-            report: TargetReport {
-                id: u64::from(id),
-                status: TargetStatus::Localizing.as_str().into(),
-                center: center.coords.into(),
-                found_at_s: time_s,
-                ..TargetReport::default()
+            report: {
+                let mut report = TargetReport {
+                    id: u64::from(id),
+                    status: TargetStatus::Localizing.as_str().into(),
+                    found_at_s: time_s,
+                    ..TargetReport::default()
+                };
+                report.set_localized_center(center);
+                report
             },
         }
     }
@@ -105,9 +108,11 @@ impl MissionTarget {
 /// The catalog: mission targets by localization id.
 pub type Catalog = BTreeMap<u32, MissionTarget>;
 
-/// Whether `center` lies horizontally within `radius_m` of a target the mission has finished
-/// with or is working on (any status but `localizing` and `duplicate`), other than `except`:
-/// a re-registration of a rock already handled.
+/// Whether `center` (a localized centre) lies horizontally within `radius_m` of the localized
+/// centre of a target the mission has finished with or is working on (any status but
+/// `localizing` and `duplicate`), other than `except`: a re-registration of a rock already
+/// handled. Localized centres are compared, not a scan's centroid, so that both carry the
+/// filter's own bias.
 pub fn is_already_handled(
     catalog: &Catalog,
     center: &Point3<f64>,
@@ -117,7 +122,9 @@ pub fn is_already_handled(
     catalog.iter().any(|(id, m)| {
         Some(*id) != except
             && !matches!(m.status, TargetStatus::Localizing | TargetStatus::Duplicate)
-            && (m.report.center[0] - center.x).hypot(m.report.center[1] - center.y) < radius_m
+            && (m.report.localized_center[0] - center.x)
+                .hypot(m.report.localized_center[1] - center.y)
+                < radius_m
     })
 }
 

@@ -9,7 +9,7 @@ use nalgebra::{Isometry3, Point3, Vector3};
 use scarp_datasets::world::{Rock, RockRole, World};
 
 use super::catalog::{Catalog, TargetStatus};
-use super::report::MissionReport;
+use super::report::{CENTER_FROM_SCAN, MissionReport};
 
 /// A target farther than this from every true rock's centroid matches none, metres.
 pub const MATCH_RADIUS_M: f64 = 3.0;
@@ -80,27 +80,40 @@ pub fn estimate_frame_error_m(
     (true_centroid + estimator_error_m - center).norm()
 }
 
-/// Fills each target's `gt_rock_id`, `gt_role`, `localization_error_m` and (where the
-/// estimator's error at its localization is known) `localization_error_estimate_frame_m`, and
-/// the report's `distractors_mapped` and `targets_missed`.
+/// Fills each target's `gt_rock_id` and `gt_role` (the true rock nearest its `center`), the
+/// errors of its localized centre (`localization_error_m`, and where the estimator's error at
+/// its localization is known `localization_error_estimate_frame_m`) and of its `center`
+/// (`center_error_m`, `center_error_estimate_frame_m`), and the report's `distractors_mapped`
+/// and `targets_missed`.
 pub fn ground_truth_summary(world: &World, targets: &mut Catalog, report: &mut MissionReport) {
     for m in targets.values_mut() {
-        let center = Point3::from(m.report.center);
+        let r = &mut m.report;
+        let center = Point3::from(r.center);
+        let localized = Point3::from(r.localized_center);
         match nearest_rock(world, &center) {
             Some((rock, distance)) => {
-                m.report.gt_rock_id = Some(rock.id);
-                m.report.gt_role = Some(rock.role.as_str().into());
-                m.report.localization_error_m = Some(distance);
-                m.report.localization_error_estimate_frame_m = m
-                    .report
-                    .estimator_error_at_localization_m
-                    .map(|e| estimate_frame_error_m(&center, &rock.centroid, &Vector3::from(e)));
+                r.gt_rock_id = Some(rock.id);
+                r.gt_role = Some(rock.role.as_str().into());
+                r.center_error_m = Some(distance);
+                r.localization_error_m = Some((localized - rock.centroid).norm());
+                let in_estimate_frame = |at: &Point3<f64>, error: Option<[f64; 3]>| {
+                    error.map(|e| estimate_frame_error_m(at, &rock.centroid, &Vector3::from(e)))
+                };
+                r.localization_error_estimate_frame_m =
+                    in_estimate_frame(&localized, r.estimator_error_at_localization_m);
+                r.center_error_estimate_frame_m = if r.center_source == CENTER_FROM_SCAN {
+                    in_estimate_frame(&center, r.estimator_error_over_keyframes_m)
+                } else {
+                    r.localization_error_estimate_frame_m
+                };
             }
             None => {
-                m.report.gt_rock_id = None;
-                m.report.gt_role = None;
-                m.report.localization_error_m = None;
-                m.report.localization_error_estimate_frame_m = None;
+                r.gt_rock_id = None;
+                r.gt_role = None;
+                r.center_error_m = None;
+                r.localization_error_m = None;
+                r.localization_error_estimate_frame_m = None;
+                r.center_error_estimate_frame_m = None;
             }
         }
     }
@@ -169,6 +182,12 @@ mod tests {
         // The estimator was off by 0.2 m east and 0.1 m up while localizing it: in its frame
         // the centre is 0.1 m east, 0.4 m south and 0.1 m low of where the rock appeared.
         biased.report.estimator_error_at_localization_m = Some([0.2, 0.0, 0.1]);
+        // Its scan then placed it 5 cm east and 2 cm up, in a map frame the estimator held
+        // 4 cm east and 2 cm up over the keyframes: 1 cm off in that frame.
+        biased
+            .report
+            .set_scan_center(&(rocks[0].centroid + Vector3::new(0.05, 0.0, 0.02)));
+        biased.report.estimator_error_over_keyframes_m = Some([0.04, 0.0, 0.02]);
         targets.insert(1, biased);
         targets.insert(2, target(distractor.centroid, TargetStatus::Mapped));
         targets.insert(3, target(rocks[1].centroid, TargetStatus::Unconverged));
@@ -188,6 +207,12 @@ mod tests {
             (in_estimate_frame - 0.18f64.sqrt()).abs() < 1e-9,
             "{in_estimate_frame}"
         );
+        let scanned = &targets[&1].report;
+        assert!((scanned.center_error_m.unwrap() - 0.0029f64.sqrt()).abs() < 1e-9);
+        assert!((scanned.center_error_estimate_frame_m.unwrap() - 0.01).abs() < 1e-9);
+        // A centre C_e alone: both errors are the localization's.
+        let unscanned = &targets[&2].report;
+        assert_eq!(unscanned.center_error_m, unscanned.localization_error_m);
         assert_eq!(targets[&3].report.localization_error_estimate_frame_m, None);
         assert_eq!(targets[&2].report.gt_role.as_deref(), Some("distractor"));
         assert_eq!(targets[&4].report.gt_rock_id, None);

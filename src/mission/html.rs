@@ -346,7 +346,7 @@ cylinders black; collisions red crosses, safety interventions orange triangles.<
     );
     html.push_str(
         "<h2>Targets</h2><table><tr><th>id</th><th>status</th><th>true rock</th>\
-<th>localization error (m)</th><th>coverage</th><th>base coverage</th><th>F1cm</th><th>F2cm</th>\
+<th>localization error (m)</th><th>centre error, estimate frame (m)</th><th>coverage</th><th>base coverage</th><th>F1cm</th><th>F2cm</th>\
 <th>accuracy (mm)</th><th>completeness (mm)</th><th>visible GT</th><th>ATE before BA (mm)</th>\
 <th>ATE after BA (mm)</th><th>α_min (°)</th><th>95% interval (°)</th><th>α_min true (°)</th><th>toppling PGA (g)</th></tr>\n",
     );
@@ -354,7 +354,7 @@ cylinders black; collisions red crosses, safety interventions orange triangles.<
         let mm = |v: Option<f64>| opt(v.map(|v| v * 1000.0), 1);
         let _ = writeln!(
             html,
-            "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{:.2}</td><td>{:.2}</td><td>{}</td>\
+            "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{:.2}</td><td>{:.2}</td><td>{}</td>\
 <td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
             t.id,
             t.status,
@@ -363,6 +363,10 @@ cylinders black; collisions red crosses, safety interventions orange triangles.<
                 t.gt_role.as_deref().unwrap_or("")
             )),
             opt(t.localization_error_m, 2),
+            match t.center_error_estimate_frame_m {
+                Some(e) => format!("{e:.2} ({})", t.center_source),
+                None => "–".into(),
+            },
             t.coverage,
             t.base_coverage,
             opt(t.fscore_1cm, 3),

@@ -237,7 +237,7 @@ pub fn process_flight(inputs: &ProcessInputs<'_>) -> MissionResult<MissionReport
             .entry(state.id)
             .or_insert_with(|| MissionTarget::new(state.id, &state.center, t_found));
         // The row describes the localization the map was planned from.
-        target.report.center = state.center.coords.into();
+        target.report.set_localized_center(&state.center);
         target.covariance_xy = Some(state.covariance_xy);
         target.report.localization_converged = state.converged;
         target.set_status(TargetStatus::Mapping);

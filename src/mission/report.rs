@@ -18,8 +18,17 @@ pub struct TargetReport {
     pub id: u64,
     /// Status (`mapped`, `incomplete`, …).
     pub status: String,
-    /// Localized centre C_e, world ENU metres.
+    /// The target's position, world ENU metres (the frame the vehicle flies in): the volume
+    /// centroid of its closed scan once mapped (`center_source` `"scan"`), else the localized
+    /// centre C_e (`"localization"`). `targets.csv` and `targets.geojson` give this one.
     pub center: [f64; 3],
+    /// Where `center` comes from: `"localization"` (the depth filter's C_e, as
+    /// `localized_center`) or `"scan"` (the closed scan's volume centroid).
+    #[serde(default = "localization_source")]
+    pub center_source: String,
+    /// The localized centre C_e the mission planned its flight around, world ENU metres.
+    #[serde(default)]
+    pub localized_center: [f64; 3],
     /// Axis of the bounding cylinder flown around it (x, y), world ENU metres: C_e, or where
     /// the first mapped frame's box saw the target (`mapping.recenter_on_first_frame`), in the
     /// map's frame.
@@ -74,7 +83,7 @@ pub struct TargetReport {
     pub gt_rock_id: Option<u32>,
     /// Role of that rock (`target` or `distractor`).
     pub gt_role: Option<String>,
-    /// Distance from C_e to the true rock's centroid, metres.
+    /// Distance from C_e (`localized_center`) to the true rock's centroid, metres.
     pub localization_error_m: Option<f64>,
     /// The state estimator's mean position error (estimate − truth, ENU metres) over the
     /// frames that updated this target's localization (ground truth).
@@ -84,6 +93,19 @@ pub struct TargetReport {
     /// in the frame the vehicle flies in, metres.
     #[serde(default)]
     pub localization_error_estimate_frame_m: Option<f64>,
+    /// The state estimator's mean position error (estimate − truth, ENU metres) over the
+    /// keyframes of the target's map: the frame its scan, and a `"scan"` centre, are in
+    /// (ground truth).
+    #[serde(default)]
+    pub estimator_error_over_keyframes_m: Option<[f64; 3]>,
+    /// Distance from `center` to the true rock's centroid, metres.
+    #[serde(default)]
+    pub center_error_m: Option<f64>,
+    /// Distance from `center` to the true centroid moved by the estimator's mean error over
+    /// the frames that placed it (`estimator_error_over_keyframes_m` for a `"scan"` centre,
+    /// `estimator_error_at_localization_m` for C_e), metres.
+    #[serde(default)]
+    pub center_error_estimate_frame_m: Option<f64>,
     /// F-score at τ = 1 cm against the visible ground truth: the mesh within 10 cm of the true
     /// rock's box, its precision against the rock and its pedestal (both true surface), its
     /// recall on the rock's visible surface alone.
@@ -110,6 +132,33 @@ pub struct TargetReport {
     /// Smallest true clearance while fine-localizing and mapping this target, metres.
     #[serde(default)]
     pub min_clearance_m: Option<f64>,
+}
+
+impl TargetReport {
+    /// Records C_e (world ENU metres) as `localized_center`, and as `center` unless a scan
+    /// placed the target.
+    pub fn set_localized_center(&mut self, center: &Point3<f64>) {
+        self.localized_center = center.coords.into();
+        if self.center_source != CENTER_FROM_SCAN {
+            self.center = self.localized_center;
+            self.center_source = CENTER_FROM_LOCALIZATION.into();
+        }
+    }
+
+    /// Records the closed scan's volume centroid (world ENU metres) as `center`.
+    pub fn set_scan_center(&mut self, centroid: &Point3<f64>) {
+        self.center = centroid.coords.into();
+        self.center_source = CENTER_FROM_SCAN.into();
+    }
+}
+
+/// `center_source`'s value for a centre from the localization filter.
+pub const CENTER_FROM_LOCALIZATION: &str = "localization";
+/// `center_source`'s value for a centre from the target's closed scan.
+pub const CENTER_FROM_SCAN: &str = "scan";
+
+fn localization_source() -> String {
+    CENTER_FROM_LOCALIZATION.into()
 }
 
 /// Wall time spent in each stage, seconds.
@@ -221,6 +270,7 @@ impl MissionReport {
                 properties: serde_json::json!({
                     "id": t.id,
                     "status": t.status,
+                    "center_source": t.center_source,
                     "size_m": t.size_m,
                     "alpha_min_deg": t.alpha_min_deg,
                     "alpha_min_low_deg": t.alpha_min_low_deg,
@@ -234,16 +284,17 @@ impl MissionReport {
         write_atomically(dir.join("targets.csv"), |w| {
             writeln!(
                 w,
-                "id,status,x_m,y_m,z_m,lat_deg,lon_deg,alt_m,size_m,alpha_min_deg,alpha_min_low_deg,alpha_min_high_deg,toppling_pga_g"
+                "id,status,center_source,x_m,y_m,z_m,lat_deg,lon_deg,alt_m,size_m,alpha_min_deg,alpha_min_low_deg,alpha_min_high_deg,toppling_pga_g"
             )?;
             let opt = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.4}"));
             for t in &self.targets {
                 let g = frame.enu_to_geodetic(&Point3::from(t.center));
                 writeln!(
                     w,
-                    "{},{},{:.3},{:.3},{:.3},{:.8},{:.8},{:.3},{},{},{},{},{}",
+                    "{},{},{},{:.3},{:.3},{:.3},{:.8},{:.8},{:.3},{},{},{},{},{}",
                     t.id,
                     t.status,
+                    t.center_source,
                     t.center[0],
                     t.center[1],
                     t.center[2],
@@ -273,12 +324,16 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let report = MissionReport {
             interrupted: true,
-            targets: vec![TargetReport {
-                id: 3,
-                status: TargetStatus::Mapped.as_str().into(),
-                center: [10.0, -5.0, 2.0],
-                alpha_min_deg: Some(12.5),
-                ..TargetReport::default()
+            targets: vec![{
+                let mut t = TargetReport {
+                    id: 3,
+                    status: TargetStatus::Mapped.as_str().into(),
+                    alpha_min_deg: Some(12.5),
+                    ..TargetReport::default()
+                };
+                t.set_localized_center(&Point3::new(10.4, -5.3, 2.6));
+                t.set_scan_center(&Point3::new(10.0, -5.0, 2.0));
+                t
             }],
             ..MissionReport::default()
         };
@@ -293,6 +348,14 @@ mod tests {
                 .unwrap();
         assert_eq!(json["interrupted"], true);
         assert_eq!(json["targets"][0]["status"], "mapped");
+        assert_eq!(json["targets"][0]["localized_center"][2], 2.6);
+        // A later scan does not give the centre back to the filter.
+        let mut t = report.targets[0].clone();
+        t.set_localized_center(&Point3::new(0.0, 0.0, 0.0));
+        assert_eq!(
+            (t.center, t.center_source.as_str()),
+            ([10.0, -5.0, 2.0], "scan")
+        );
         let geo: serde_json::Value =
             serde_json::from_slice(&std::fs::read(dir.path().join("targets.geojson")).unwrap())
                 .unwrap();
@@ -305,7 +368,7 @@ mod tests {
             csv.lines()
                 .nth(1)
                 .unwrap()
-                .starts_with("3,mapped,10.000,-5.000")
+                .starts_with("3,mapped,scan,10.000,-5.000")
         );
     }
 }

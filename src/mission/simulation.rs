@@ -584,7 +584,7 @@ impl<'a> Mission<'a> {
             if let Some(m) = self.targets.get_mut(&state.id)
                 && m.status.follows_filter()
             {
-                m.report.center = state.center.coords.into();
+                m.report.set_localized_center(&state.center);
                 m.covariance_xy = Some(state.covariance_xy);
             }
         }
@@ -820,7 +820,7 @@ impl<'a> Mission<'a> {
         timings.planning_s += clock.elapsed().as_secs_f64();
         if let Some(m) = self.targets.get_mut(&id) {
             m.report.localization_converged = state.converged;
-            m.report.center = state.center.coords.into();
+            m.report.set_localized_center(&state.center);
             m.report.cylinder_center_xy = [cylinder.center_x_m, cylinder.center_y_m];
             m.report.cylinder_radius_m = cylinder.radius_m;
             m.report.cylinder_z_bottom_m = cylinder.z_bottom_m;
