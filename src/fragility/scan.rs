@@ -1190,15 +1190,24 @@ fn fan(mesh: &mut TriangleMesh, chain: &[u32]) -> Option<FilledPatch> {
     Some(patch)
 }
 
-/// Separates the rock from its pedestal and the ground just above the support plane (or at the
-/// neck when no plane is seen all round), extrapolates its contact polygon from the basal
-/// profile and closes it. The scan is z-up, world frame, metres.
+/// The scanned rock cut off above its support, before closing: the largest manifold
+/// component of the scan above the cut (the support plane plus
+/// [`ScanConfig::cut_above_support_m`], or the neck where no plane was found), its vertices
+/// compacted.
+struct CutRock {
+    rock: TriangleMesh,
+    neck_z: f64,
+    support_plane: Option<SupportPlane>,
+    contact_height_m: f64,
+    cut_z: f64,
+}
+
+/// [`CutRock`] of a scan.
 ///
 /// # Errors
-/// [`FragilityError::EmptyMesh`] for an empty scan or nothing above the cut;
-/// [`FragilityError::Degenerate`] when no neck is found or the basal profile is too sparse for
-/// a contact polygon.
-pub fn close_scan(mesh: &TriangleMesh, config: &ScanConfig) -> Result<ClosedScan, FragilityError> {
+/// An invalid `config`; [`FragilityError::Degenerate`] without a neck;
+/// [`FragilityError::EmptyMesh`] when nothing is left above the cut.
+fn cut_rock(mesh: &TriangleMesh, config: &ScanConfig) -> Result<CutRock, FragilityError> {
     config.validate()?;
     let (neck_z, axis_xy) = find_neck(mesh, config)?;
     let support_plane = support_plane(mesh, &axis_xy, neck_z, config);
@@ -1243,6 +1252,51 @@ pub fn close_scan(mesh: &TriangleMesh, config: &ScanConfig) -> Result<ClosedScan
         }
         rock.faces.push(g);
     }
+    Ok(CutRock {
+        rock,
+        neck_z,
+        support_plane,
+        contact_height_m,
+        cut_z,
+    })
+}
+
+/// The volume centroid of a scanned rock (world frame, metres): the scan cut off above its
+/// support as [`close_scan`] cuts it and closed by the same patches, without reading its
+/// contact. It places a rock whose contact [`close_scan`] refuses to read (a base seen on one
+/// side, a support not seen); the patches guess its unseen parts.
+///
+/// # Errors
+/// Those of the cut (no neck, or nothing above the cut), and [`FragilityError::Degenerate`]
+/// when the closed rock encloses no volume.
+pub fn scan_centroid(
+    mesh: &TriangleMesh,
+    config: &ScanConfig,
+) -> Result<Point3<f64>, FragilityError> {
+    let mut rock = cut_rock(mesh, config)?.rock;
+    fill_holes(&mut rock);
+    rock.volume_properties()
+        .map(|v| v.centroid)
+        .map_err(|e| FragilityError::Degenerate(format!("the closed scan: {e}")))
+}
+
+/// Separates the rock from its pedestal and the ground just above the support plane (or at the
+/// neck when no plane is seen all round), extrapolates its contact polygon from the basal
+/// profile and closes it. The scan is z-up, world frame, metres.
+///
+/// # Errors
+/// [`FragilityError::EmptyMesh`] for an empty scan or nothing above the cut;
+/// [`FragilityError::Degenerate`] when no neck is found or the basal profile is too sparse for
+/// a contact polygon.
+pub fn close_scan(mesh: &TriangleMesh, config: &ScanConfig) -> Result<ClosedScan, FragilityError> {
+    let CutRock {
+        mut rock,
+        neck_z,
+        support_plane,
+        contact_height_m,
+        cut_z,
+    } = cut_rock(mesh, config)?;
+    let plane_z = support_plane.map(|p| p.height_m);
     // The profile is measured on the scanned surface only, before the fans add vertices.
     let profile = BasalProfile::measure(&rock.positions, contact_height_m, config)?;
     let support_outline =
@@ -2124,6 +2178,13 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(error.contains("directions"), "{error}");
+        // The contact is refused, but the closed scan still places the rock.
+        let true_centroid = wedge_scan().1.volume_properties().unwrap().centroid;
+        let centroid = scan_centroid(&scan, &ScanConfig::default()).unwrap();
+        assert!(
+            (centroid - true_centroid).norm() < 0.03,
+            "{centroid} against {true_centroid}"
+        );
     }
 
     /// The perimeter of the rectangle |x| ≤ `half_x`, |y| ≤ `half_y`, counter-clockwise, with
