@@ -22,9 +22,9 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
-use nalgebra::{Isometry3, Point2, Vector3};
+use nalgebra::{Isometry3, Point2, Point3, Vector3};
 use scarp::fragility::rocking::minimum_support;
-use scarp::fragility::scan::{ClosedScan, analyze_scan};
+use scarp::fragility::scan::{ClosedScan, analyze_scan, scan_centroid};
 use scarp::fragility::{ContactSpec, FragilityAnalysis, FragilityConfig, FragilityReport, analyze};
 use scarp::mission::mapping::map_to_world;
 use scarp_datasets::world::World;
@@ -207,6 +207,7 @@ fn main() -> Result<()> {
                 continue;
             };
             let rock = world.rock(gt_id as u32).context("gt rock")?;
+            print_centre(&run, gt_id, t, &mesh, &rock.centroid, &config);
             let Some(pedestal) = &rock.pedestal else {
                 continue;
             };
@@ -340,6 +341,35 @@ fn print_plane(label: &str, closed: &ClosedScan, truth_z: f64) {
         closed
             .support_plane
             .map_or(f64::NAN, |p| p.roughness_m * 1e3)
+    );
+}
+
+/// Prints `CENTRE world seed rock status localized-m scan-m`: the estimate-frame errors of the
+/// target's localized centre (from `mission.json`) and of its scan's centroid
+/// ([`scan_centroid`] of the saved mesh, against the true centroid moved by the estimator's
+/// mean error over the keyframes); `nan` where one is missing.
+fn print_centre(
+    run: &Path,
+    gt_id: u64,
+    target: &serde_json::Value,
+    mesh: &scarp_slam::TriangleMesh,
+    true_centroid: &Point3<f64>,
+    config: &FragilityConfig,
+) {
+    let number = |key: &str| target[key].as_f64().unwrap_or(f64::NAN);
+    let scan_error = match (
+        scan_centroid(mesh, &config.scan),
+        serde_json::from_value::<[f64; 3]>(target["estimator_error_over_keyframes_m"].clone()),
+    ) {
+        (Ok(c), Ok(e)) => (true_centroid + Vector3::from(e) - c).norm(),
+        _ => f64::NAN,
+    };
+    println!(
+        "CENTRE {} {} {gt_id} {} {:.3} {scan_error:.3}",
+        run.parent().unwrap().file_name().unwrap().to_string_lossy(),
+        run.file_name().unwrap().to_string_lossy(),
+        target["status"].as_str().unwrap_or("?"),
+        number("localization_error_estimate_frame_m"),
     );
 }
 
