@@ -484,6 +484,19 @@ impl<'a> Mission<'a> {
         let noise_m = config.rangefinder_sigma_m * rng.sample::<f64, _>(StandardNormal);
         let truth = Point3::from(*position);
         let nearest = nearest_depth_point(&frame.depth_m, self.sensors.camera());
+        let proximity_dropped = rng.random::<f64>() < config.proximity_dropout_probability;
+        let proximity_noise_m = config.proximity_sigma_m * rng.sample::<f64, _>(StandardNormal);
+        let proximity = self
+            .env
+            .clearance_at(&truth)
+            .map(|c| c.clearance_m)
+            .filter(|&c| c <= config.proximity_range_m && !proximity_dropped)
+            .map(|c| {
+                (
+                    (c + proximity_noise_m).max(0.0),
+                    towards_nearest_surface(&self.env, &truth),
+                )
+            });
         let senses = Senses {
             range_measured_m: self
                 .env
@@ -495,6 +508,8 @@ impl<'a> Mission<'a> {
                 .range_below(&(truth + self.sensors.position_drift_m()), max_range),
             nearest_depth_m: nearest.map(|(d, _)| d),
             nearest_depth_direction: nearest.map(|(_, ray)| estimate.rotation * ray),
+            proximity_m: proximity.map(|(d, _)| d),
+            proximity_direction: proximity.and_then(|(_, towards)| towards),
         };
         let step = self.monitor.update(t, &senses);
         if step.intervention_started
@@ -1040,4 +1055,19 @@ impl<'a> Mission<'a> {
         )?;
         Ok(())
     }
+}
+
+/// Unit vector from `p` towards the nearest surface of `env` (world frame): the negative
+/// gradient of its clearance, by central differences over 5 cm; `None` where the clearance
+/// is flat or undefined there.
+fn towards_nearest_surface(env: &Environment, p: &Point3<f64>) -> Option<Vector3<f64>> {
+    const STEP_M: f64 = 0.05;
+    let clearance = |q: Point3<f64>| env.clearance_at(&q).map(|c| c.clearance_m);
+    let mut gradient = Vector3::zeros();
+    for axis in 0..3 {
+        let step = Vector3::ith(axis, STEP_M);
+        gradient[axis] = (clearance(p + step)? - clearance(p - step)?) / (2.0 * STEP_M);
+    }
+    let norm = gradient.norm();
+    (norm > 1e-6).then(|| -gradient / norm)
 }
