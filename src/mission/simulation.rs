@@ -25,7 +25,7 @@ use super::config::MissionConfig;
 use super::evaluation::EstimatorErrorByTarget;
 use super::mapping::{MappingSession, finish_target, mapped_status};
 use super::mode::{FlightLogEntry, Mode};
-use super::monitor::{SafetyMonitor, Senses, nearest_depth_point};
+use super::monitor::{SafetyMonitor, Senses, nearest_depth_m};
 use super::motion::MotionSystem;
 use super::mount::CameraMount;
 use super::perception::Perception;
@@ -327,8 +327,8 @@ impl<'a> Mission<'a> {
     fn step(&mut self, timings: &mut StageTimings) -> MissionResult<()> {
         let t = self.sensors.vehicle().time_s() + self.camera_period_s();
         let clock = Instant::now();
-        // The retreat reflex makes the controller believe it is nearer the surface than it is.
-        let flown = self.navigation_error_m() - self.monitor.retreat_m();
+        // The climb reflex makes the controller believe it is lower than it is.
+        let flown = self.navigation_error_m() - Vector3::z() * self.monitor.climb_m();
         self.sensors.vehicle_mut().advance_to(t, &flown)?;
         let t = self.sensors.vehicle().time_s();
         let position = self.sensors.vehicle().world_from_body().translation.vector;
@@ -385,7 +385,7 @@ impl<'a> Mission<'a> {
                 self.inputs.world,
             )?;
         }
-        self.watch_clearance(t, &position, &estimate, &frame);
+        self.watch_clearance(t, &position, &frame);
 
         match self.mode {
             Mode::Search => {
@@ -465,15 +465,8 @@ impl<'a> Mission<'a> {
 
     /// The safety layer's step: reads the rangefinder at the true position (the map predicts
     /// its reading at the state estimator's position, truth + its drift) and the frame's
-    /// nearest depth (its direction turned to the world by the estimated attitude, `estimate`
-    /// being the camera's estimated pose), updates the monitor, and records an intervention.
-    fn watch_clearance(
-        &mut self,
-        t: f64,
-        position: &Vector3<f64>,
-        estimate: &Isometry3<f64>,
-        frame: &RgbdFrame,
-    ) {
+    /// nearest depth, updates the monitor, and records an intervention.
+    fn watch_clearance(&mut self, t: f64, position: &Vector3<f64>, frame: &RgbdFrame) {
         let config = &self.inputs.config.safety;
         let max_range = config.rangefinder_max_range_m;
         let mut rng = Xoshiro256PlusPlus::seed_from_u64(derive_seed(
@@ -483,20 +476,6 @@ impl<'a> Mission<'a> {
         let dropped = rng.random::<f64>() < config.rangefinder_dropout_probability;
         let noise_m = config.rangefinder_sigma_m * rng.sample::<f64, _>(StandardNormal);
         let truth = Point3::from(*position);
-        let nearest = nearest_depth_point(&frame.depth_m, self.sensors.camera());
-        let proximity_dropped = rng.random::<f64>() < config.proximity_dropout_probability;
-        let proximity_noise_m = config.proximity_sigma_m * rng.sample::<f64, _>(StandardNormal);
-        let proximity = self
-            .env
-            .clearance_at(&truth)
-            .map(|c| c.clearance_m)
-            .filter(|&c| c <= config.proximity_range_m && !proximity_dropped)
-            .map(|c| {
-                (
-                    (c + proximity_noise_m).max(0.0),
-                    towards_nearest_surface(&self.env, &truth),
-                )
-            });
         let senses = Senses {
             range_measured_m: self
                 .env
@@ -506,10 +485,7 @@ impl<'a> Mission<'a> {
             range_expected_m: self
                 .env
                 .range_below(&(truth + self.sensors.position_drift_m()), max_range),
-            nearest_depth_m: nearest.map(|(d, _)| d),
-            nearest_depth_direction: nearest.map(|(_, ray)| estimate.rotation * ray),
-            proximity_m: proximity.map(|(d, _)| d),
-            proximity_direction: proximity.and_then(|(_, towards)| towards),
+            nearest_depth_m: nearest_depth_m(&frame.depth_m, self.sensors.camera()),
         };
         let step = self.monitor.update(t, &senses);
         if step.intervention_started
@@ -519,7 +495,7 @@ impl<'a> Mission<'a> {
                 .safety
                 .record_intervention(t, self.mode, (*position).into(), c);
             tracing::warn!(
-                "safety intervention at t = {t:.1} s in {}: a surface sensed at {:.2} m (inside {:.2} m), backing away; true clearance {:.2} m to {}",
+                "safety intervention at t = {t:.1} s in {}: a surface sensed at {:.2} m (inside {:.2} m), climbing; true clearance {:.2} m to {}",
                 event.mode,
                 step.sensed_clearance_m.unwrap_or(f64::NAN),
                 config.safety_radius_m,
@@ -1055,19 +1031,4 @@ impl<'a> Mission<'a> {
         )?;
         Ok(())
     }
-}
-
-/// Unit vector from `p` towards the nearest surface of `env` (world frame): the negative
-/// gradient of its clearance, by central differences over 5 cm; `None` where the clearance
-/// is flat or undefined there.
-fn towards_nearest_surface(env: &Environment, p: &Point3<f64>) -> Option<Vector3<f64>> {
-    const STEP_M: f64 = 0.05;
-    let clearance = |q: Point3<f64>| env.clearance_at(&q).map(|c| c.clearance_m);
-    let mut gradient = Vector3::zeros();
-    for axis in 0..3 {
-        let step = Vector3::ith(axis, STEP_M);
-        gradient[axis] = (clearance(p + step)? - clearance(p - step)?) / (2.0 * STEP_M);
-    }
-    let norm = gradient.norm();
-    (norm > 1e-6).then(|| -gradient / norm)
 }
