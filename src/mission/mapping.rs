@@ -660,8 +660,6 @@ pub fn finish_target(
 
     let clock = Instant::now();
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    // The scan is open (ROI cut, unseen parts): cut the rock off above its support, extrapolate
-    // its contact from the basal profile, close it and analyse it.
     // The closed rock's volume centroid places the target to centimetres where the box filter
     // places it to decimetres, in the map's frame (the estimate's over the keyframes); also
     // where its contact is refused.
@@ -672,6 +670,8 @@ pub fn finish_target(
         .as_deref()
         .and_then(|t| mean_position_error_m(&keyframes.world_from_camera_estimate, t))
         .map(Into::into);
+    // The scan is open (ROI cut, unseen parts): cut the rock off above its support, extrapolate
+    // its contact from the basal profile, close it and analyse it.
     let fragility = analyze_scan(&mesh, &config.fragility).map(|(_, analysis)| analysis);
     let coverage_required = session.coverage_required;
     let mut mapped = shortfall.is_none() || !coverage_required;
