@@ -356,7 +356,6 @@ fn print_centre(
     true_centroid: &Point3<f64>,
     config: &FragilityConfig,
 ) {
-    let number = |key: &str| target[key].as_f64().unwrap_or(f64::NAN);
     let scan_error = match (
         scan_centroid(mesh, &config.scan),
         serde_json::from_value::<[f64; 3]>(target["estimator_error_over_keyframes_m"].clone()),
@@ -369,7 +368,9 @@ fn print_centre(
         run.parent().unwrap().file_name().unwrap().to_string_lossy(),
         run.file_name().unwrap().to_string_lossy(),
         target["status"].as_str().unwrap_or("?"),
-        number("localization_error_estimate_frame_m"),
+        target["localization_error_estimate_frame_m"]
+            .as_f64()
+            .unwrap_or(f64::NAN),
     );
 }
 

@@ -36,7 +36,7 @@ use crate::evaluation::mesh::{MeshEvalConfig, MeshEvaluation, Visibility, evalua
 use crate::evaluation::trajectory::{
     Alignment, TrajectoryEvalConfig, evaluate_trajectory, umeyama,
 };
-use crate::fragility::scan::{analyze_scan, scan_centroid};
+use crate::fragility::scan::{analyze_closed_scan, close_scan, scan_centroid};
 use crate::fragility::{ContactSpec, analyze};
 
 /// A frame kept for bundle adjustment and re-integration.
@@ -660,19 +660,24 @@ pub fn finish_target(
 
     let clock = Instant::now();
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    // The scan is open (ROI cut, unseen parts): cut the rock off above its support, extrapolate
+    // its contact from the basal profile, close it and analyse it.
+    let closed = close_scan(&mesh, &config.fragility.scan);
     // The closed rock's volume centroid places the target to centimetres where the box filter
-    // places it to decimetres, in the map's frame (the estimate's over the keyframes); also
-    // where its contact is refused.
-    if let Ok(centroid) = scan_centroid(&mesh, &config.fragility.scan) {
+    // places it to decimetres, in the map's frame (the estimate's over the keyframes); where
+    // closing refused the contact, the same cut and patches without it.
+    let centroid = match &closed {
+        Ok(closed) => closed.mesh.volume_properties().ok().map(|v| v.centroid),
+        Err(_) => scan_centroid(&mesh, &config.fragility.scan).ok(),
+    };
+    if let Some(centroid) = centroid {
         report.set_scan_center(&centroid);
     }
     report.estimator_error_over_keyframes_m = truth
         .as_deref()
         .and_then(|t| mean_position_error_m(&keyframes.world_from_camera_estimate, t))
         .map(Into::into);
-    // The scan is open (ROI cut, unseen parts): cut the rock off above its support, extrapolate
-    // its contact from the basal profile, close it and analyse it.
-    let fragility = analyze_scan(&mesh, &config.fragility).map(|(_, analysis)| analysis);
+    let fragility = closed.and_then(|closed| analyze_closed_scan(&closed, &config.fragility));
     let coverage_required = session.coverage_required;
     let mut mapped = shortfall.is_none() || !coverage_required;
     match &fragility {
