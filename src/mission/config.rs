@@ -290,10 +290,14 @@ pub struct MappingConfig {
     /// that moved its α_min by 3.2°; every 5th frame by 1.6°, every 3rd by 0.1°. Memory: about
     /// 2 MB a kept frame, freed when the target is finished.
     pub reintegration_frame_stride: usize,
-    /// While mapping, the controller flies on the map's odometry (anchored at the state
-    /// estimate when mapping began) instead of the GPS/IMU estimate, so the rings stay put
-    /// around the rock while the GPS walk wanders. Default false: an odometry failure then
-    /// steers the vehicle too (seen once on the default world, 0.9 m from the rock).
+    /// While mapping, the controller flies in the map's frame (the odometry, anchored at the
+    /// state estimate when mapping began) instead of on the GPS/IMU estimate, so the rings
+    /// stay put around the rock while the GPS walk wanders (see [`super::navigation`]).
+    /// Default true. It was false until session 32: an odometry failure on the base ring had
+    /// steered the vehicle to 0.9 m of a rock (2026-11-22, before the tracker's estimate gate
+    /// and the safety monitor); flying on the estimate instead carried holdout-c seed 47's
+    /// rings 1.8 m across a rock and into it. The odometry's offset from the estimate is now
+    /// gated by the estimator's walk.
     pub fly_on_odometry: bool,
     /// A mapped frame whose tracked rotation since the previous frame strays from the state
     /// estimator's by more than `estimate_gate_min_deg` plus this many σ of the estimator's
@@ -343,7 +347,7 @@ impl Default for MappingConfig {
             odometry: scarp_slam::odometry::OdometryConfig::default(),
             keyframes: scarp_slam::keyframes::KeyframeConfig::default(),
             reintegration_frame_stride: 2,
-            fly_on_odometry: false,
+            fly_on_odometry: true,
             estimate_gate_sigmas: 4.0,
             estimate_gate_min_deg: 0.5,
             max_dropped_s: 1.0,

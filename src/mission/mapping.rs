@@ -70,8 +70,8 @@ pub struct MappingSession {
     frames_mapped: usize,
     /// Whether the target counts as mapped only once the coverage threshold is reached.
     coverage_required: bool,
-    /// The last mapped frame's odometry position minus its true position (simulation only:
-    /// what a controller flying on the odometry would be off by).
+    /// The last processed frame's odometry position minus its true position, when it was
+    /// tracked (simulation only: what a controller flying on the odometry would be off by).
     navigation_error_m: Option<Vector3<f64>>,
     /// Frames dropped: their odometry failed or disagreed with the state estimate.
     frames_dropped: usize,
@@ -401,10 +401,11 @@ impl MappingSession {
         Ok(())
     }
 
-    /// How far the odometry's position of the last mapped frame is from the truth (metres,
-    /// world ENU): the navigation error of a vehicle flying on the map's odometry. `None`
-    /// before the first frame and after an odometry failure (then the state estimate is all
-    /// there is).
+    /// How far the odometry's position of the frame last given to [`Self::process`] is from
+    /// the truth (metres, world ENU): the navigation error of a vehicle flying on the map's
+    /// odometry. `None` when that frame was not tracked (out of the region of interest,
+    /// dropped, or placed by the state estimate after an odometry failure) or its truth is
+    /// unknown.
     pub fn navigation_error_m(&self) -> Option<Vector3<f64>> {
         self.navigation_error_m
     }
@@ -426,6 +427,7 @@ impl MappingSession {
         world_from_camera_estimate: &Isometry3<f64>,
         world_from_camera_truth: Option<&Isometry3<f64>>,
     ) -> MissionResult<()> {
+        self.navigation_error_m = None;
         if !self.would_map(world_from_camera_estimate) {
             return Ok(());
         }

@@ -12,6 +12,8 @@
 //! - [`offline`]: the catalog of a recorded flight (`scarp process`).
 //! - [`record`]: the flight as sensed (`scarp simulate --record`).
 //! - [`perception`]: detect → track → localize during Search and FineLocalize.
+//! - [`navigation`]: the position the controller flies on (the estimate, or the map's frame
+//!   while mapping).
 //! - [`mapping`]: Map mode for one target, then bundle adjustment, mesh, fragility, export.
 //! - [`coverage`]: the cylinder-coverage test that ends mapping.
 //! - [`evaluation`]: matching targets to the ground truth.
@@ -30,6 +32,7 @@ pub mod mode;
 pub mod monitor;
 pub mod motion;
 pub mod mount;
+pub mod navigation;
 pub mod offline;
 pub mod perception;
 pub mod record;

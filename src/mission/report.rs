@@ -132,6 +132,12 @@ pub struct TargetReport {
     /// Smallest true clearance while fine-localizing and mapping this target, metres.
     #[serde(default)]
     pub min_clearance_m: Option<f64>,
+    /// How far the vehicle's navigation error moved while it flew this target's rings, from
+    /// the first mapped frame on, metres (ground truth): how far the rings were carried
+    /// across the rock. Flying in the map's frame (`mapping.fly_on_odometry`) keeps it to the
+    /// odometry's drift; on the state estimate it is the GPS walk's.
+    #[serde(default)]
+    pub ring_drift_m: Option<f64>,
 }
 
 impl TargetReport {

@@ -28,6 +28,7 @@ use super::mode::{FlightLogEntry, Mode};
 use super::monitor::{SafetyMonitor, Senses, nearest_depth_m};
 use super::motion::MotionSystem;
 use super::mount::CameraMount;
+use super::navigation::{MapFrameOffset, RingDrift};
 use super::perception::Perception;
 use super::record::{FlightOrigin, FlightRecorder};
 use super::report::{MissionReport, ModeChange, StageTimings};
@@ -37,6 +38,10 @@ use super::sensors::{Sensors, Simulated};
 use super::mapping::{
     RecenterStep, Recentering, cylinder_around, cylinder_radius_m, cylinder_seen_in_frame,
 };
+
+/// The map's frame is handed back to the estimate once the vehicle's reference is this close
+/// below the search altitude, metres: out of the target's way, its climb done.
+const CLEAR_OF_TARGET_BELOW_SEARCH_M: f64 = 0.5;
 
 /// Where the lawn-mower was left, to resume it.
 #[derive(Debug, Clone)]
@@ -133,6 +138,10 @@ pub struct Mission<'a> {
     safety: SafetyLog,
     /// The safety layer acting on the rangefinder and the depth camera.
     monitor: SafetyMonitor,
+    /// The map's frame relative to the estimate, while mapping and as it is handed back.
+    map_frame: MapFrameOffset,
+    /// The target being mapped: how far its rings drift across it (ground truth).
+    ring_drift: RingDrift,
     /// A collision ended the flight.
     crashed: bool,
     /// The last FineLocalize depth image and its estimated pose: where the ground under a
@@ -231,6 +240,8 @@ impl<'a> Mission<'a> {
                     .collect(),
             ),
             monitor: SafetyMonitor::new(&config.safety),
+            map_frame: MapFrameOffset::new(&config.estimator),
+            ring_drift: RingDrift::default(),
             crashed: false,
             last_depth: None,
             recentering: Recentering::default(),
@@ -327,6 +338,10 @@ impl<'a> Mission<'a> {
     fn step(&mut self, timings: &mut StageTimings) -> MissionResult<()> {
         let t = self.sensors.vehicle().time_s() + self.camera_period_s();
         let clock = Instant::now();
+        let clear = !matches!(self.mode, Mode::Map(_))
+            && self.sensors.vehicle().current_waypoint().position_m.z
+                >= self.search.altitude_m - CLEAR_OF_TARGET_BELOW_SEARCH_M;
+        self.map_frame.advance(t, clear);
         // The climb reflex makes the controller believe it is lower than it is.
         let flown = self.navigation_error_m() - Vector3::z() * self.monitor.climb_m();
         self.sensors.vehicle_mut().advance_to(t, &flown)?;
@@ -443,15 +458,29 @@ impl<'a> Mission<'a> {
                 let map_this_frame =
                     self.recenter_map_on_first_frame(id, &frame, &estimate, timings)?;
                 let clock = Instant::now();
+                let estimate_error = self.estimate_error_m();
                 let complete = match self.mapping.as_mut() {
                     Some(session) => {
                         if map_this_frame {
                             session.process(frame, &estimate, Some(&truth))?;
+                            if let Some(odometry_error) = session.navigation_error_m() {
+                                if !self.map_frame.observe(&odometry_error, &estimate_error)
+                                    && self.map_frame.rejected_in_a_row() == 1
+                                {
+                                    tracing::warn!(
+                                        "t = {t:.1} s, target {id}: the map's odometry is {:.2} m from the state estimate, more than its walk allows; flying on the last plausible offset",
+                                        (odometry_error - estimate_error).norm()
+                                    );
+                                }
+                            }
                         }
                         session.coverage().is_complete()
                     }
                     None => true,
                 };
+                if self.mapping.as_ref().is_some_and(|s| !s.is_empty()) {
+                    self.ring_drift.observe(&self.navigation_error_m());
+                }
                 timings.map_s += clock.elapsed().as_secs_f64();
                 if complete || self.sensors.vehicle().trajectory_done() {
                     self.finish_mapping(id, timings)?;
@@ -505,18 +534,22 @@ impl<'a> Mission<'a> {
         }
     }
 
-    /// What the controller's position estimate is off by: while mapping with
-    /// `mapping.fly_on_odometry`, the vehicle flies on the map's odometry (anchored at the state
-    /// estimate when mapping began, so the rings stay put around the rock while the GPS walk
-    /// wanders); otherwise on the state estimate, its height corrected by the rangefinder.
+    /// The state estimate's position error as the vehicle knows it: the estimator's drift,
+    /// its height corrected by the rangefinder.
+    fn estimate_error_m(&self) -> Vector3<f64> {
+        self.sensors.position_drift_m() + Vector3::z() * self.monitor.height_correction_m()
+    }
+
+    /// What the controller's position estimate is off by: with `mapping.fly_on_odometry`, the
+    /// estimate moved into the last map's frame ([`MapFrameOffset`]: at a tracked frame, the
+    /// odometry's own error); otherwise the estimate's.
     fn navigation_error_m(&self) -> Vector3<f64> {
-        self.mapping
-            .as_ref()
-            .filter(|_| self.inputs.config.mapping.fly_on_odometry)
-            .and_then(MappingSession::navigation_error_m)
-            .unwrap_or_else(|| {
-                self.sensors.position_drift_m() + Vector3::z() * self.monitor.height_correction_m()
-            })
+        let offset = if self.inputs.config.mapping.fly_on_odometry {
+            self.map_frame.offset_m()
+        } else {
+            Vector3::zeros()
+        };
+        self.estimate_error_m() + offset
     }
 
     /// Turns the camera mount toward the pitch the mapping rings ask for at the reference's
@@ -831,6 +864,7 @@ impl<'a> Mission<'a> {
             Ok(rings) => {
                 self.adopt_rings(id, rings);
                 self.recentering = Recentering::default();
+                self.ring_drift = RingDrift::default();
                 self.mapping = Some(MappingSession::new(
                     id,
                     &cylinder,
@@ -859,6 +893,7 @@ impl<'a> Mission<'a> {
         let Some(target) = self.targets.get_mut(&id) else {
             return Ok(());
         };
+        target.report.ring_drift_m = self.ring_drift.largest_m();
         let points = self
             .perception
             .target_state(id)
