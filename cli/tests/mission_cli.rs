@@ -73,6 +73,16 @@ fn small_world_mission_finds_maps_and_measures_its_target() {
         "{json:#}"
     );
 
+    // The rings are flown in the map's frame: the navigation error moves by the odometry's
+    // drift (and the estimate's walk while frames go untracked), well under the walk the state
+    // estimate made over the same time, which a flight on the estimate carries across the rock.
+    let ring_drift = t["ring_drift_m"].as_f64().unwrap();
+    let walk = estimate_walk_while_mapping_m(&out_dir, &json);
+    assert!(
+        ring_drift < 0.6 * walk,
+        "ring drift {ring_drift} m, the estimate walked {walk} m"
+    );
+
     let id = t["id"].as_u64().unwrap().to_string();
     let target_dir = out_dir.join("targets").join(&id);
     for file in [
@@ -202,6 +212,31 @@ fn the_recorded_flight_processes_into_the_same_catalog(
     for file in ["targets.geojson", "targets.csv", "report.html", "map.png"] {
         assert!(processed.join(file).is_file(), "missing {file}");
     }
+}
+
+/// How far the state estimate's error (`trajectory.txt` less `groundtruth.txt`) moved from its
+/// value at the start of Map mode, at most, over the mission's first Map mode, metres.
+fn estimate_walk_while_mapping_m(out_dir: &Path, mission: &serde_json::Value) -> f64 {
+    let modes = mission["modes"].as_array().unwrap();
+    let start = modes.iter().position(|m| m["mode"] == "map").unwrap();
+    let from_s = modes[start]["time_s"].as_f64().unwrap();
+    let to_s = modes
+        .get(start + 1)
+        .map_or(f64::INFINITY, |m| m["time_s"].as_f64().unwrap());
+    let read = |file: &str| scarp_export::tum::read_tum_trajectory(&out_dir.join(file)).unwrap();
+    let (estimate, truth) = (read("trajectory.txt"), read("groundtruth.txt"));
+    let errors: Vec<_> = estimate
+        .iter()
+        .zip(&truth)
+        .filter(|(e, _)| (from_s..to_s).contains(&e.timestamp_s))
+        .map(|(e, t)| {
+            e.world_from_camera.translation.vector - t.world_from_camera.translation.vector
+        })
+        .collect();
+    errors
+        .iter()
+        .map(|e| (e - errors[0]).norm())
+        .fold(0.0, f64::max)
 }
 
 /// Runs `scarp simulate` on the small world in `dir` with the mission file `config` (TOML

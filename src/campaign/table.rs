@@ -128,6 +128,10 @@ pub struct TargetRow {
     pub center_error_estimate_frame_m: Option<f64>,
     /// Smallest true clearance: the target's own where reported, else the whole run's, metres.
     pub min_clearance_m: Option<f64>,
+    /// How far the vehicle's navigation error moved while it flew the target's rings, metres,
+    /// where reported.
+    #[serde(default)]
+    pub ring_drift_m: Option<f64>,
     /// Collisions of the whole run.
     pub run_collisions: Option<u64>,
     /// Why it is not mapped or not analysed, from the mission.
@@ -390,6 +394,7 @@ pub fn read_run(
             center_source: s(t, "center_source"),
             center_error_estimate_frame_m: f(t, "center_error_estimate_frame_m"),
             min_clearance_m: f(t, "min_clearance_m").or(run_row.min_clearance_m),
+            ring_drift_m: f(t, "ring_drift_m"),
             run_collisions: run_row.collisions,
             error: s(t, "error"),
         });
@@ -538,6 +543,13 @@ pub fn totals(runs: &[RunRow], targets: &[TargetRow]) -> Totals {
             counted
                 .iter()
                 .filter_map(|t| Some((t.center_error_estimate_frame_m?, at(t)))),
+        ),
+        figure(
+            "ring drift across the rock (m)",
+            true,
+            counted
+                .iter()
+                .filter_map(|t| Some((t.ring_drift_m?, at(t)))),
         ),
         figure(
             "α_min interval width (°)",

@@ -458,26 +458,20 @@ impl<'a> Mission<'a> {
                 let map_this_frame =
                     self.recenter_map_on_first_frame(id, &frame, &estimate, timings)?;
                 let clock = Instant::now();
-                let estimate_error = self.estimate_error_m();
-                let complete = match self.mapping.as_mut() {
+                let (complete, odometry_error) = match self.mapping.as_mut() {
                     Some(session) => {
+                        let mut odometry_error = None;
                         if map_this_frame {
                             session.process(frame, &estimate, Some(&truth))?;
-                            if let Some(odometry_error) = session.navigation_error_m() {
-                                if !self.map_frame.observe(&odometry_error, &estimate_error)
-                                    && self.map_frame.rejected_in_a_row() == 1
-                                {
-                                    tracing::warn!(
-                                        "t = {t:.1} s, target {id}: the map's odometry is {:.2} m from the state estimate, more than its walk allows; flying on the last plausible offset",
-                                        (odometry_error - estimate_error).norm()
-                                    );
-                                }
-                            }
+                            odometry_error = session.navigation_error_m();
                         }
-                        session.coverage().is_complete()
+                        (session.coverage().is_complete(), odometry_error)
                     }
-                    None => true,
+                    None => (true, None),
                 };
+                if let Some(odometry_error) = odometry_error {
+                    self.enter_map_frame(t, id, &odometry_error);
+                }
                 if self.mapping.as_ref().is_some_and(|s| !s.is_empty()) {
                     self.ring_drift.observe(&self.navigation_error_m());
                 }
@@ -530,6 +524,20 @@ impl<'a> Mission<'a> {
                 config.safety_radius_m,
                 event.min_clearance_m,
                 event.obstacle
+            );
+        }
+    }
+
+    /// Takes the offset of the map's frame from a tracked frame whose odometry is
+    /// `odometry_error_m` off the truth (world ENU metres), warning when the gate refuses it.
+    fn enter_map_frame(&mut self, t: f64, id: u32, odometry_error_m: &Vector3<f64>) {
+        let estimate_error = self.estimate_error_m();
+        if !self.map_frame.observe(odometry_error_m, &estimate_error)
+            && self.map_frame.rejected_in_a_row() == 1
+        {
+            tracing::warn!(
+                "t = {t:.1} s, target {id}: the map's odometry is {:.2} m from the state estimate, more than its walk allows; flying on the last plausible offset",
+                (odometry_error_m - estimate_error).norm()
             );
         }
     }
