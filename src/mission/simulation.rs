@@ -469,7 +469,9 @@ impl<'a> Mission<'a> {
                     }
                     None => (true, None),
                 };
-                if let Some(odometry_error) = odometry_error {
+                if let Some(odometry_error) = odometry_error
+                    && self.inputs.config.mapping.fly_on_odometry
+                {
                     self.enter_map_frame(t, id, &odometry_error);
                 }
                 if self.mapping.as_ref().is_some_and(|s| !s.is_empty()) {
@@ -548,16 +550,11 @@ impl<'a> Mission<'a> {
         self.sensors.position_drift_m() + Vector3::z() * self.monitor.height_correction_m()
     }
 
-    /// What the controller's position estimate is off by: with `mapping.fly_on_odometry`, the
-    /// estimate moved into the last map's frame ([`MapFrameOffset`]: at a tracked frame, the
-    /// odometry's own error); otherwise the estimate's.
+    /// What the controller's position estimate is off by: the estimate moved into the last
+    /// map's frame ([`MapFrameOffset`]: at a tracked frame, the odometry's own error). Without
+    /// `mapping.fly_on_odometry` no offset is ever taken, and this is the estimate's.
     fn navigation_error_m(&self) -> Vector3<f64> {
-        let offset = if self.inputs.config.mapping.fly_on_odometry {
-            self.map_frame.offset_m()
-        } else {
-            Vector3::zeros()
-        };
-        self.estimate_error_m() + offset
+        self.estimate_error_m() + self.map_frame.offset_m()
     }
 
     /// Turns the camera mount toward the pitch the mapping rings ask for at the reference's
