@@ -52,6 +52,7 @@ fn outcome(plan: &Result<scarp_planning::prelude::RingPlan, impl std::fmt::Displ
                     _ => None,
                 })
                 .unwrap_or_else(|| "flown".into()),
+            Some(reason) if reason.contains("over the slope") => "dropped: terrain lift".into(),
             Some(reason) if reason.contains("transition") => {
                 "dropped: approach or transition".into()
             }

@@ -56,6 +56,20 @@ pub enum PlanError {
         /// World y of the query (metres).
         y_m: f64,
     },
+    /// A terrain-following ring would have to climb this far above its planned height to keep
+    /// its clearance over a slope: from there it no longer looks level at the rock's base, and
+    /// part of it sees the rock only beyond the depth range.
+    #[error(
+        "ring {ring} would climb {lift_m:.2} m over the slope to keep its clearance (limit {limit_m:.2} m): it no longer looks level at the base"
+    )]
+    TerrainLift {
+        /// Index of the ring in flying order.
+        ring: usize,
+        /// The largest climb of its waypoints (metres).
+        lift_m: f64,
+        /// The configured limit (metres).
+        limit_m: f64,
+    },
     /// The search altitude is not above the target, so no circle with the camera pitch exists.
     #[error(
         "search altitude h_s = {search_altitude_m:.3} m must be above the target centre z_e = {target_z_m:.3} m"

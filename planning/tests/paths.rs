@@ -568,6 +568,46 @@ fn base_ring_on_a_scarp_follows_the_terrain() {
     assert!(traj.duration_s() < 600.0, "{} s", traj.duration_s());
 }
 
+#[test]
+fn base_ring_over_a_high_scarp_is_dropped_not_flown_out_of_view() {
+    // A 3 m step beside the rock: following it, the base ring would climb about 2.8 m on the
+    // upper side, out of a level view of the base and, for a wide rock, out of the depth range.
+    let step = |x: f64| 3.0 * ((x - 1.5) / 1.0).clamp(0.0, 1.0);
+    let terrain = Heightfield::from_fn(-20.0, -20.0, 0.25, 161, 161, |x, _| step(x)).unwrap();
+    let env = Environment::new(Some(terrain), &[]).unwrap();
+    let mut cfg = PlanningConfig::default();
+    let cyl = VerticalCylinder::new(0.0, 0.0, 0.8, 0.0, 2.5).unwrap();
+    let start = Waypoint::new(Point3::new(-8.0, 0.0, 10.0), 0.0);
+    let plan = common::plan_rings(&cyl, &start, &env, &cfg).unwrap();
+    assert!(!plan.flies_base_ring(), "{:?}", plan.repairs);
+    match &plan.repairs[0] {
+        Repair::DroppedRing { ring: 0, reason } => {
+            assert!(
+                reason.contains("climb") && reason.contains("limit 1.50 m"),
+                "{reason}"
+            )
+        }
+        other => panic!("unexpected {other:?}"),
+    }
+    assert!(plan.clearance.unwrap().is_clear());
+    // A limit above the climb keeps the ring, lifted by as much.
+    cfg.mapping.base_ring.max_terrain_lift_m = 3.5;
+    let lifted = common::plan_rings(&cyl, &start, &env, &cfg).unwrap();
+    assert!(lifted.flies_base_ring(), "{:?}", lifted.repairs);
+    let lift = lifted
+        .repairs
+        .iter()
+        .find_map(|r| match r {
+            Repair::FollowedTerrain {
+                ring: 0,
+                max_lift_m,
+            } => Some(*max_lift_m),
+            _ => None,
+        })
+        .unwrap();
+    assert!(lift > 1.5 && lift <= 3.5, "lift {lift}");
+}
+
 /// A rock wider above than below (a cap of 1.6 m radius on a 0.6 m neck): mapping that ends
 /// on the base ring, 2.1 m off the axis, would climb straight up 0.5 m past the cap. The exit
 /// backs away first and keeps 2 m.

@@ -19,7 +19,8 @@ use scarp_export::ply::{PlyEncoding, write_mesh, write_point_cloud};
 use scarp_export::tum::{StampedPose, write_tum_trajectory};
 use scarp_planning::prelude::VerticalCylinder;
 use scarp_slam::mapping::{
-    BetweenFrame, KeyframeSet, ModelTracker, ModelTrackingConfig, RefineConfig, refine_keyframes,
+    BetweenFrame, KeyframeSet, ModelTracker, ModelTrackingConfig, RefineConfig, TrackedFrame,
+    refine_keyframes,
 };
 use scarp_slam::meshing::MeshingConfig;
 use scarp_slam::tsdf::Roi;
@@ -443,6 +444,15 @@ impl MappingSession {
             );
             return Ok(());
         }
+        if tracing::enabled!(tracing::Level::TRACE) {
+            trace_tracked_frame(
+                self.target_id,
+                frame.timestamp_s,
+                &tracked,
+                world_from_camera_estimate,
+                world_from_camera_truth,
+            );
+        }
         self.navigation_error_m = world_from_camera_truth
             .filter(|_| !tracked.fell_back)
             .map(|truth| tracked.world_from_camera.translation.vector - truth.translation.vector);
@@ -470,6 +480,38 @@ impl MappingSession {
         self.frames_mapped += 1;
         Ok(())
     }
+}
+
+/// One TRACE line per tracked frame (`RUST_LOG=scarp::mission::mapping=trace`): how the
+/// odometry converged and, in simulation, how far the odometry and the state estimate are from
+/// the truth (world ENU, metres), to find where a map's odometry slid.
+fn trace_tracked_frame(
+    target_id: u32,
+    timestamp_s: f64,
+    tracked: &TrackedFrame,
+    world_from_camera_estimate: &Isometry3<f64>,
+    world_from_camera_truth: Option<&Isometry3<f64>>,
+) {
+    let error = |pose: &Isometry3<f64>| {
+        world_from_camera_truth.map_or_else(String::new, |truth| {
+            let e = pose.translation.vector - truth.translation.vector;
+            format!("({:+.3}, {:+.3}, {:+.3})", e.x, e.y, e.z)
+        })
+    };
+    let (inlier_ratio, correspondences, iterations) =
+        tracked.odometry.as_ref().map_or((f64::NAN, 0, 0), |o| {
+            (o.inlier_ratio, o.correspondences, o.iterations)
+        });
+    tracing::trace!(
+        "target {target_id}: frame {} at {timestamp_s:.2} s: keyframe {:?}, fell back {}, \
+         inliers {inlier_ratio:.3} of {correspondences}, {iterations} iterations; \
+         odometry − truth {}, estimate − truth {}",
+        tracked.index,
+        tracked.keyframe,
+        tracked.fell_back,
+        error(&tracked.world_from_camera),
+        error(world_from_camera_estimate),
+    );
 }
 
 /// Writes the keyframes' trajectories (TUM, `world_from_camera`, stamped with `timestamps_s`):
