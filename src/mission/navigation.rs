@@ -47,7 +47,7 @@ pub struct MapFrameOffset {
     gate_vertical_m: f64,
     previous_time_s: Option<f64>,
     rejected_in_a_row: usize,
-    /// Offsets refused by the gate so far.
+    /// Offsets refused by the gate since [`Self::take_rejected`] last counted them.
     pub rejected: usize,
 }
 
@@ -102,6 +102,12 @@ impl MapFrameOffset {
     /// Offsets refused since the last one taken.
     pub fn rejected_in_a_row(&self) -> usize {
         self.rejected_in_a_row
+    }
+
+    /// The offsets refused since the last call (or since [`Self::new`]), counting afresh from
+    /// zero: one target's count when called as its mapping starts and ends.
+    pub fn take_rejected(&mut self) -> usize {
+        std::mem::take(&mut self.rejected)
     }
 
     /// Advances to mission time `time_s` (non-decreasing): when `clear` (not mapping, and out
@@ -199,6 +205,8 @@ mod tests {
         assert_eq!((frame.rejected, frame.rejected_in_a_row()), (3, 3));
         assert!(frame.observe(&Vector3::new(0.9, 0.0, 0.0), &Vector3::zeros()));
         assert_eq!((frame.rejected, frame.rejected_in_a_row()), (3, 0));
+        assert_eq!(frame.take_rejected(), 3);
+        assert_eq!(frame.take_rejected(), 0, "counted afresh");
     }
 
     #[test]

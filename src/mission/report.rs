@@ -138,6 +138,11 @@ pub struct TargetReport {
     /// odometry's drift; on the state estimate it is the GPS walk's.
     #[serde(default)]
     pub ring_drift_m: Option<f64>,
+    /// Tracked frames whose odometry the map frame's gate refused while this target was
+    /// mapped (the odometry was further from the state estimate than the estimator's walk
+    /// allows; the vehicle flew on the last plausible offset). Each run of them is a WARN line.
+    #[serde(default)]
+    pub map_frame_refusals: usize,
 }
 
 impl TargetReport {

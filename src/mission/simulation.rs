@@ -870,6 +870,7 @@ impl<'a> Mission<'a> {
                 self.adopt_rings(id, rings);
                 self.recentering = Recentering::default();
                 self.ring_drift = RingDrift::default();
+                self.map_frame.take_rejected();
                 self.mapping = Some(MappingSession::new(
                     id,
                     &cylinder,
@@ -899,6 +900,7 @@ impl<'a> Mission<'a> {
             return Ok(());
         };
         target.report.ring_drift_m = self.ring_drift.largest_m();
+        target.report.map_frame_refusals = self.map_frame.take_rejected();
         let points = self
             .perception
             .target_state(id)
