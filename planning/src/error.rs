@@ -58,7 +58,7 @@ pub enum PlanError {
     },
     /// A terrain-following ring would have to climb this far above its planned height to keep
     /// its clearance over a slope: from there it no longer looks level at the rock's base, and
-    /// part of it sees the rock only beyond the depth range.
+    /// part of it may see the rock only beyond the depth range.
     #[error(
         "ring {ring} would climb {lift_m:.2} m over the slope to keep its clearance (limit {limit_m:.2} m): it no longer looks level at the base"
     )]

@@ -88,8 +88,9 @@ pub struct BaseRingConfig {
     /// refused. Default 1.
     pub max_raise_m: f64,
     /// The ring follows the terrain (each waypoint lifted to keep the clearance over the
-    /// ground beside it); a ring that this lifts by more than this (m) anywhere is dropped
-    /// ([`PlanError::TerrainLift`]), and the paper's rings map the rock alone. Default 1.5.
+    /// ground beside it); a ring that following the terrain lifts by more than this (m)
+    /// anywhere is dropped ([`PlanError::TerrainLift`]), and the paper's rings map the rock
+    /// alone. Default 1.5.
     ///
     /// Why: on holdout-c seed 48 a rock on a hillside got a base ring widened 1.5 m and lifted
     /// 3.8 m on its uphill side. For 14 s the camera saw the rock only beyond the 5 m depth
@@ -886,7 +887,8 @@ fn polygon_clearance(
 /// [`PlanError::Clearance`] if no repair within `ccfg.max_raise_m` works.
 ///
 /// When the base ring makes the plan fail (no widening, raise or bend within its limits clears
-/// it, or no route to or from it is clear), the plan is made again without it, and
+/// it, following the terrain would lift it beyond [`BaseRingConfig::max_terrain_lift_m`], or
+/// no route to or from it is clear), the plan is made again without it, and
 /// [`Repair::DroppedRing`] says so: the paper's rings alone still map the rock.
 pub fn plan_mapping_rings_clear(
     cylinder: &VerticalCylinder,
