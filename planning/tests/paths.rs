@@ -524,16 +524,24 @@ fn base_ring_between_two_rocks_bends_round_the_near_one() {
     assert!(!dropped.flies_base_ring(), "{:?}", dropped.repairs);
 }
 
+/// A step `height_m` high (a scarp, 1 m wide) 1.5 m east of a rock whose ground is at 0, the
+/// rock's cylinder, and a start west of it, high above.
+fn rock_beside_a_scarp(height_m: f64) -> (Environment, VerticalCylinder, Waypoint) {
+    let step = move |x: f64| height_m * ((x - 1.5) / 1.0).clamp(0.0, 1.0);
+    let terrain = Heightfield::from_fn(-20.0, -20.0, 0.25, 161, 161, |x, _| step(x)).unwrap();
+    (
+        Environment::new(Some(terrain), &[]).unwrap(),
+        VerticalCylinder::new(0.0, 0.0, 0.8, 0.0, 2.5).unwrap(),
+        Waypoint::new(Point3::new(-8.0, 0.0, 10.0), 0.0),
+    )
+}
+
 #[test]
 fn base_ring_on_a_scarp_follows_the_terrain() {
-    // A 1.5 m step (a scarp, 1 m wide) 1.5 m east of a rock whose ground is at 0: a level
-    // base ring 1.8 m over the cylinder's bottom would fly 0.3 m over the upper side.
-    let step = |x: f64| 1.5 * ((x - 1.5) / 1.0).clamp(0.0, 1.0);
-    let terrain = Heightfield::from_fn(-20.0, -20.0, 0.25, 161, 161, |x, _| step(x)).unwrap();
-    let env = Environment::new(Some(terrain), &[]).unwrap();
+    // A 1.5 m step: a level base ring 1.8 m over the cylinder's bottom would fly 0.3 m over
+    // the upper side.
+    let (env, cyl, start) = rock_beside_a_scarp(1.5);
     let cfg = PlanningConfig::default();
-    let cyl = VerticalCylinder::new(0.0, 0.0, 0.8, 0.0, 2.5).unwrap();
-    let start = Waypoint::new(Point3::new(-8.0, 0.0, 10.0), 0.0);
     let plan = common::plan_rings(&cyl, &start, &env, &cfg).unwrap();
     println!("repairs: {:?}", plan.repairs);
     assert!(plan.rings[0].follows_terrain);
@@ -572,12 +580,8 @@ fn base_ring_on_a_scarp_follows_the_terrain() {
 fn base_ring_over_a_high_scarp_is_dropped_not_flown_out_of_view() {
     // A 3 m step beside the rock: following it, the base ring would climb about 2.8 m on the
     // upper side, out of a level view of the base and, for a wide rock, out of the depth range.
-    let step = |x: f64| 3.0 * ((x - 1.5) / 1.0).clamp(0.0, 1.0);
-    let terrain = Heightfield::from_fn(-20.0, -20.0, 0.25, 161, 161, |x, _| step(x)).unwrap();
-    let env = Environment::new(Some(terrain), &[]).unwrap();
+    let (env, cyl, start) = rock_beside_a_scarp(3.0);
     let mut cfg = PlanningConfig::default();
-    let cyl = VerticalCylinder::new(0.0, 0.0, 0.8, 0.0, 2.5).unwrap();
-    let start = Waypoint::new(Point3::new(-8.0, 0.0, 10.0), 0.0);
     let plan = common::plan_rings(&cyl, &start, &env, &cfg).unwrap();
     assert!(!plan.flies_base_ring(), "{:?}", plan.repairs);
     match &plan.repairs[0] {

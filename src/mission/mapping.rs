@@ -444,15 +444,13 @@ impl MappingSession {
             );
             return Ok(());
         }
-        if tracing::enabled!(tracing::Level::TRACE) {
-            trace_tracked_frame(
-                self.target_id,
-                frame.timestamp_s,
-                &tracked,
-                world_from_camera_estimate,
-                world_from_camera_truth,
-            );
-        }
+        trace_tracked_frame(
+            self.target_id,
+            frame.timestamp_s,
+            &tracked,
+            world_from_camera_estimate,
+            world_from_camera_truth,
+        );
         self.navigation_error_m = world_from_camera_truth
             .filter(|_| !tracked.fell_back)
             .map(|truth| tracked.world_from_camera.translation.vector - truth.translation.vector);
@@ -484,7 +482,8 @@ impl MappingSession {
 
 /// One TRACE line per tracked frame (`RUST_LOG=scarp::mission::mapping=trace`): how the
 /// odometry converged and, in simulation, how far the odometry and the state estimate are from
-/// the truth (world ENU, metres), to find where a map's odometry slid.
+/// the truth (world ENU, metres), to find where a map's odometry slid. The errors are formatted
+/// only when TRACE is on (`tracing` evaluates an event's arguments after its level check).
 fn trace_tracked_frame(
     target_id: u32,
     timestamp_s: f64,
