@@ -9,7 +9,10 @@ use scarp_datasets::sensor::SensorConfig;
 use scarp_datasets::world::World;
 use scarp_slam::PinholeCamera;
 use scarp_slam::image::{ImagePyramid, gray_from_rgb};
-use scarp_slam::odometry::{OdometryConfig, SourceFrame, TrackingReference, track};
+use scarp_slam::mapping::ReacquisitionSearch;
+use scarp_slam::odometry::{
+    OdometryConfig, SourceFrame, TrackingReference, track, track_multi_start,
+};
 
 fn bench(c: &mut Criterion) {
     let world = World::builtin_default().expect("default world");
@@ -85,6 +88,36 @@ fn bench(c: &mut Criterion) {
     });
     group.bench_function("gauss_newton_only_640x480", |b| {
         b.iter(|| track(&reference, &source, &guess, &config).expect("track"))
+    });
+    // A re-acquisition after 14 s out of view with the GPS walk's search (about 350 guesses),
+    // the estimate having walked 1.1 m: a rare frame, not a per-frame cost.
+    let search = ReacquisitionSearch {
+        min_gap_s: 1.0,
+        horizontal_sigma_m: 0.5,
+        vertical_sigma_m: 0.8,
+        correlation_s: 30.0,
+        white_sigma_m: 0.03,
+        sigmas: 3.0,
+        step_m: 0.4,
+        max_starts: 1500,
+        refine_starts: 4,
+    };
+    let walked = Translation3::new(0.9, -0.6, 0.35) * guess;
+    let starts: Vec<_> = search
+        .offsets_m(14.0)
+        .iter()
+        .map(|o| Translation3::from(*o) * walked)
+        .collect();
+    let multi = track_multi_start(&reference, &source, &starts, 4, &config).expect("track");
+    let e = truth.inverse() * multi.result.reference_from_current;
+    eprintln!(
+        "re-acquisition over {} guesses: error {:.3} mm, failure {:?}",
+        starts.len(),
+        e.translation.vector.norm() * 1e3,
+        multi.result.failure
+    );
+    group.bench_function("reacquisition_14s_gap_640x480", |b| {
+        b.iter(|| track_multi_start(&reference, &source, &starts, 4, &config).expect("track"))
     });
     group.bench_function("pyramid_640x480", |b| b.iter(|| pyramid(1)));
     let p = pyramid(1);

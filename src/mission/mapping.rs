@@ -76,6 +76,8 @@ pub struct MappingSession {
     navigation_error_m: Option<Vector3<f64>>,
     /// Frames dropped: their odometry failed or disagreed with the state estimate.
     frames_dropped: usize,
+    /// Frames after a gap in view tracked from a search over the estimate's walk.
+    reacquisitions: usize,
 }
 
 /// Frames tried to see the target in before its map starts where the localization put it
@@ -328,6 +330,7 @@ impl MappingSession {
             odometry: m.odometry.clone(),
             keyframes: m.keyframes,
             estimate_rotation_gate: m.estimate_rotation_gate(&config.estimator),
+            reacquisition: m.reacquisition_search(&config.estimator),
             max_dropped_frames: (m.max_dropped_s * config.map_camera_rate_hz).round() as usize,
             ..ModelTrackingConfig::default()
         };
@@ -344,6 +347,7 @@ impl MappingSession {
             coverage_required: true,
             navigation_error_m: None,
             frames_dropped: 0,
+            reacquisitions: 0,
         })
     }
 
@@ -434,6 +438,25 @@ impl MappingSession {
         }
         frame.instance_mask = None;
         let tracked = self.tracker.process(&frame, world_from_camera_estimate)?;
+        if let Some(r) = &tracked.reacquisition {
+            self.reacquisitions += 1;
+            tracing::info!(
+                "target {}: frame at {:.2} s, {:.1} s after the last one kept, searched over {} \
+                 guesses: {}; kept the guess {:.2} m from the estimate's ({:+.2}, {:+.2}, {:+.2})",
+                self.target_id,
+                frame.timestamp_s,
+                r.gap_s,
+                r.starts,
+                tracked.distrust_reason().map_or_else(
+                    || "re-acquired".to_string(),
+                    |why| format!("dropped, {why}")
+                ),
+                r.offset_m.norm(),
+                r.offset_m.x,
+                r.offset_m.y,
+                r.offset_m.z
+            );
+        }
         if tracked.dropped {
             self.frames_dropped += 1;
             tracing::debug!(
@@ -647,6 +670,7 @@ pub fn finish_target(
     let clock = Instant::now();
     report.frames_mapped = session.frames_mapped;
     report.frames_dropped = session.frames_dropped;
+    report.reacquisitions = session.reacquisitions;
     report.coverage = session.coverage.fraction();
     report.base_coverage = session.coverage.bottom_fraction();
     report.sweep_deg = session.coverage.sweep_deg();

@@ -48,6 +48,10 @@ pub struct TargetReport {
     /// shifted the map (for up to `mapping.max_dropped_s` in a row).
     #[serde(default)]
     pub frames_dropped: usize,
+    /// Frames after a gap in view (`mapping.reacquisition_min_gap_s`) tracked from a search
+    /// over the state estimate's walk (`mapping.reacquisition_sigmas`), kept or dropped.
+    #[serde(default)]
+    pub reacquisitions: usize,
     /// Keyframes in its bundle adjustment.
     pub keyframes: usize,
     /// Whether its point set converged before mapping (false: mapped from a compact but

@@ -11,6 +11,7 @@
 //! World is ENU metres, cameras are OpenCV, transforms are `world_from_camera`.
 
 pub mod landmarks;
+pub mod reacquisition;
 pub mod refine;
 pub mod residuals;
 pub mod tracker;
@@ -24,6 +25,7 @@ use crate::odometry::OdometryError;
 use crate::tsdf::TsdfError;
 
 pub use landmarks::{LandmarkConfig, LandmarkView, Landmarks, track_landmarks};
+pub use reacquisition::ReacquisitionSearch;
 pub use refine::{
     BetweenFrame, EstimatedNoise, KeyframeSet, RefineConfig, RefinedMap, refine_keyframes,
 };
@@ -31,8 +33,8 @@ pub use residuals::{
     CHI2_6_MEDIAN, ReprojectionStats, odometry_nees, reprojection_stats, triangulate_point,
 };
 pub use tracker::{
-    EstimateDisagreement, EstimateRotationGate, ModelTracker, ModelTrackingConfig, TrackedFrame,
-    TrackingReferenceKind,
+    EstimateDisagreement, EstimateRotationGate, ModelTracker, ModelTrackingConfig, Reacquisition,
+    TrackedFrame, TrackingReferenceKind,
 };
 
 /// An error of the mapping pipeline.

@@ -25,16 +25,18 @@
 
 use std::time::Instant;
 
-use nalgebra::{Isometry3, Matrix3, Matrix6, Vector6};
+use nalgebra::{Isometry3, Matrix3, Matrix6, Translation3, Vector3, Vector6};
 use serde::{Deserialize, Serialize};
 
 use super::MappingError;
+use super::reacquisition::ReacquisitionSearch;
 use crate::geometry::{check_finite_isometry, renormalized};
 use crate::image::gray_from_rgb;
 use crate::keyframes::{KeyframeConfig, KeyframeReason, KeyframeSelector};
 use crate::odometry::OdometryResult;
 use crate::odometry::{
     OdometryConfig, RaycastImages, SourceFrame, TrackingReference, frame_pyramid, track,
+    track_multi_start,
 };
 use crate::tsdf::raycast::{RaycastConfig, raycast};
 use crate::tsdf::{TsdfConfig, TsdfVolume};
@@ -91,6 +93,11 @@ pub struct ModelTrackingConfig {
     /// rotation may stray from the estimator's before they are dropped. Default `None` (no
     /// gate): its scale is the estimator's, which only the caller knows.
     pub estimate_rotation_gate: Option<EstimateRotationGate>,
+    /// For frames given a state estimate ([`ModelTracker::process`]): the first frame after a
+    /// gap in view is tracked from a grid of guesses spanning the estimate's walk over the
+    /// gap (see [`super::reacquisition`]). Default `None` (one guess): the walk's scale is the
+    /// estimator's, which only the caller knows.
+    pub reacquisition: Option<ReacquisitionSearch>,
 }
 
 /// The largest disagreement, degrees, between a frame's tracked rotation since the previous
@@ -156,6 +163,7 @@ impl Default for ModelTrackingConfig {
             fallback_sigma_deg: 0.5,
             max_dropped_frames: 10,
             estimate_rotation_gate: None,
+            reacquisition: None,
         }
     }
 }
@@ -184,6 +192,9 @@ pub struct TrackedFrame {
     /// The tracked rotation's disagreement with the state estimate, when beyond the
     /// [`EstimateRotationGate`] (the frame was then dropped, or placed by the estimate).
     pub disagreement: Option<EstimateDisagreement>,
+    /// For the first frame after a gap tracked from several guesses
+    /// ([`ModelTrackingConfig::reacquisition`]): the search, and the guess kept.
+    pub reacquisition: Option<Reacquisition>,
     /// Why the frame became a keyframe, or `None`.
     pub keyframe: Option<KeyframeReason>,
     /// For a keyframe after the first: the covariance of the tracked motion since the previous
@@ -195,6 +206,18 @@ pub struct TrackedFrame {
     pub odometry_ms: Option<f64>,
     /// Wall time of the TSDF integration, milliseconds.
     pub integrate_ms: f64,
+}
+
+/// How a frame after a gap in view was re-acquired ([`ModelTrackingConfig::reacquisition`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Reacquisition {
+    /// Time since the previous kept frame, seconds.
+    pub gap_s: f64,
+    /// Guesses ranked.
+    pub starts: usize,
+    /// The kept guess's offset from the plain guess (the previous kept frame moved by the
+    /// estimate's motion), world frame, metres.
+    pub offset_m: Vector3<f64>,
 }
 
 impl TrackedFrame {
@@ -263,6 +286,9 @@ impl ModelTracker {
         config.keyframes.validate().map_err(MappingError::Camera)?;
         if let Some(gate) = &config.estimate_rotation_gate {
             gate.validate()?;
+        }
+        if let Some(search) = &config.reacquisition {
+            search.validate()?;
         }
         for (field, value) in [
             ("fallback_sigma_m", config.fallback_sigma_m),
@@ -358,102 +384,136 @@ impl ModelTracker {
         let index = self.frames;
         let odometry_config = &self.config.odometry;
         let pyramid = frame_pyramid(frame, odometry_config.levels);
-        let (world_from_camera, odometry, disagreement, fell_back, odometry_ms) = match self
-            .previous
-        {
-            None => (*world_from_first_camera, None, None, false, None),
-            Some(world_from_previous) => {
-                let started = Instant::now();
-                let motion = previous_from_current_guess.unwrap_or_else(Isometry3::identity);
-                let source = SourceFrame::from_pyramid(&self.camera, &pyramid, odometry_config)?;
-                // The reference and its pose: the model seen from the previous frame, or the
-                // last keyframe.
-                let (result, world_from_reference) = match (&self.config.reference, &self.keyframe)
-                {
-                    (TrackingReferenceKind::Keyframe, Some((reference, world_from_keyframe))) => {
-                        let guess = world_from_keyframe.inverse() * world_from_previous * motion;
-                        (
-                            track(reference, &source, &guess, odometry_config)?,
-                            *world_from_keyframe,
+        let (world_from_camera, odometry, disagreement, reacquisition, fell_back, odometry_ms) =
+            match self.previous {
+                None => (*world_from_first_camera, None, None, None, false, None),
+                Some(world_from_previous) => {
+                    let started = Instant::now();
+                    let motion = previous_from_current_guess.unwrap_or_else(Isometry3::identity);
+                    let source =
+                        SourceFrame::from_pyramid(&self.camera, &pyramid, odometry_config)?;
+                    // The reference, its pose, and the guess of `reference_from_current`: the model
+                    // seen from the previous frame, or the last keyframe.
+                    let model;
+                    let (reference, world_from_reference, guess) =
+                        match (&self.config.reference, &self.keyframe) {
+                            (
+                                TrackingReferenceKind::Keyframe,
+                                Some((reference, world_from_keyframe)),
+                            ) => (
+                                reference,
+                                *world_from_keyframe,
+                                world_from_keyframe.inverse() * world_from_previous * motion,
+                            ),
+                            _ => {
+                                model = self.model_reference(&world_from_previous)?;
+                                (&model, world_from_previous, motion)
+                            }
+                        };
+                    let gap_s = self
+                        .previous_timestamp_s
+                        .map_or(0.0, |previous| frame.timestamp_s - previous);
+                    let offsets_m = match &self.config.reacquisition {
+                        Some(search) if fuse_on_guess => search.offsets_m(gap_s),
+                        _ => Vec::new(),
+                    };
+                    let (result, reacquisition) = if offsets_m.len() > 1 {
+                        let reference_from_world = world_from_reference.inverse();
+                        let world_from_guess = world_from_previous * motion;
+                        let starts: Vec<Isometry3<f64>> = offsets_m
+                            .iter()
+                            .map(|o| {
+                                reference_from_world * Translation3::from(*o) * world_from_guess
+                            })
+                            .collect();
+                        let refine = self.config.reacquisition.map_or(0, |s| s.refine_starts);
+                        let multi = track_multi_start(
+                            reference,
+                            &source,
+                            &starts,
+                            refine,
+                            odometry_config,
+                        )?;
+                        let reacquisition = Reacquisition {
+                            gap_s,
+                            starts: starts.len(),
+                            offset_m: offsets_m[multi.start],
+                        };
+                        (multi.result, Some(reacquisition))
+                    } else {
+                        (track(reference, &source, &guess, odometry_config)?, None)
+                    };
+                    let ms = started.elapsed().as_secs_f64() * 1e3;
+                    let world_from_tracked = world_from_reference * result.reference_from_current;
+                    let disagreement = if result.is_ok() {
+                        self.disagreement(
+                            frame,
+                            &world_from_previous,
+                            &world_from_tracked,
+                            previous_from_current_guess.filter(|_| fuse_on_guess),
                         )
+                    } else {
+                        None
+                    };
+                    let trusted = result.is_ok() && disagreement.is_none();
+                    if !trusted
+                        && fuse_on_guess
+                        && self.dropped_in_a_row < self.config.max_dropped_frames
+                    {
+                        self.dropped_in_a_row += 1;
+                        self.frames += 1;
+                        return Ok(TrackedFrame {
+                            index,
+                            world_from_camera: renormalized(&(world_from_previous * motion)),
+                            odometry: Some(result),
+                            fell_back: false,
+                            fused: false,
+                            dropped: true,
+                            disagreement,
+                            reacquisition,
+                            keyframe: None,
+                            keyframe_covariance: None,
+                            odometry_ms: Some(ms),
+                            integrate_ms: 0.0,
+                        });
                     }
-                    _ => {
-                        let reference = self.model_reference(&world_from_previous)?;
-                        (
-                            track(&reference, &source, &motion, odometry_config)?,
-                            world_from_previous,
-                        )
-                    }
-                };
-                let ms = started.elapsed().as_secs_f64() * 1e3;
-                let world_from_tracked = world_from_reference * result.reference_from_current;
-                let disagreement = if result.is_ok() {
-                    self.disagreement(
-                        frame,
-                        &world_from_previous,
-                        &world_from_tracked,
-                        previous_from_current_guess.filter(|_| fuse_on_guess),
-                    )
-                } else {
-                    None
-                };
-                let trusted = result.is_ok() && disagreement.is_none();
-                if !trusted
-                    && fuse_on_guess
-                    && self.dropped_in_a_row < self.config.max_dropped_frames
-                {
-                    self.dropped_in_a_row += 1;
-                    self.frames += 1;
-                    return Ok(TrackedFrame {
-                        index,
-                        world_from_camera: renormalized(&(world_from_previous * motion)),
-                        odometry: Some(result),
-                        fell_back: false,
-                        fused: false,
-                        dropped: true,
+                    let world_from_camera = if trusted {
+                        world_from_tracked
+                    } else {
+                        world_from_previous * motion
+                    };
+                    let covariance = trusted
+                        .then(|| result.information.try_inverse())
+                        .flatten()
+                        .filter(|c| c.iter().all(|v| v.is_finite()));
+                    let from_keyframe_reference = world_from_reference != world_from_previous
+                        || self.config.reference == TrackingReferenceKind::Keyframe;
+                    self.covariance_since_keyframe = match covariance {
+                        // Tracked against the keyframe itself: its covariance is the whole motion's.
+                        Some(c) if from_keyframe_reference => {
+                            chain_covariance(&Matrix6::zeros(), &c, &result.reference_from_current)
+                        }
+                        Some(c) => chain_covariance(
+                            &self.covariance_since_keyframe,
+                            &c,
+                            &result.reference_from_current,
+                        ),
+                        None => chain_covariance(
+                            &self.covariance_since_keyframe,
+                            &self.fallback_covariance(),
+                            &motion,
+                        ),
+                    };
+                    (
+                        renormalized(&world_from_camera),
+                        Some(result),
                         disagreement,
-                        keyframe: None,
-                        keyframe_covariance: None,
-                        odometry_ms: Some(ms),
-                        integrate_ms: 0.0,
-                    });
+                        reacquisition,
+                        !trusted,
+                        Some(ms),
+                    )
                 }
-                let world_from_camera = if trusted {
-                    world_from_tracked
-                } else {
-                    world_from_previous * motion
-                };
-                let covariance = trusted
-                    .then(|| result.information.try_inverse())
-                    .flatten()
-                    .filter(|c| c.iter().all(|v| v.is_finite()));
-                let from_keyframe_reference = world_from_reference != world_from_previous
-                    || self.config.reference == TrackingReferenceKind::Keyframe;
-                self.covariance_since_keyframe = match covariance {
-                    // Tracked against the keyframe itself: its covariance is the whole motion's.
-                    Some(c) if from_keyframe_reference => {
-                        chain_covariance(&Matrix6::zeros(), &c, &result.reference_from_current)
-                    }
-                    Some(c) => chain_covariance(
-                        &self.covariance_since_keyframe,
-                        &c,
-                        &result.reference_from_current,
-                    ),
-                    None => chain_covariance(
-                        &self.covariance_since_keyframe,
-                        &self.fallback_covariance(),
-                        &motion,
-                    ),
-                };
-                (
-                    renormalized(&world_from_camera),
-                    Some(result),
-                    disagreement,
-                    !trusted,
-                    Some(ms),
-                )
-            }
-        };
+            };
         let started = Instant::now();
         let fused = !fell_back || fuse_on_guess;
         if fused {
@@ -495,6 +555,7 @@ impl ModelTracker {
             fused,
             dropped: false,
             disagreement,
+            reacquisition,
             keyframe,
             keyframe_covariance,
             odometry_ms,

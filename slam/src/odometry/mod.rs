@@ -52,6 +52,7 @@ use crate::geometry::renormalized;
 use crate::image::{ImagePyramid, gray_from_rgb};
 use crate::{PinholeCamera, RgbdFrame};
 use normal_equations::{NormalEquations, normal_equations};
+use rayon::prelude::*;
 
 /// Bad arguments to the odometry (not an untrustworthy result: that is an
 /// [`OdometryFailure`] inside an `Ok`).
@@ -192,18 +193,7 @@ pub fn track(
     initial_reference_from_current: &Isometry3<f64>,
     config: &OdometryConfig,
 ) -> Result<OdometryResult, OdometryError> {
-    config.validate()?;
-    if reference.levels() < config.levels || current.levels.len() < config.levels {
-        return Err(OdometryError::Mismatch(format!(
-            "reference has {} levels, current frame {}, config wants {}",
-            reference.levels(),
-            current.levels.len(),
-            config.levels
-        )));
-    }
-    if reference.camera() != &current.camera {
-        return Err(OdometryError::Mismatch("the cameras differ".to_string()));
-    }
+    check_inputs(reference, current, config)?;
     let failed = |guess: Isometry3<f64>, failure| OdometryResult {
         reference_from_current: guess,
         information: Matrix6::zeros(),
@@ -238,52 +228,20 @@ pub fn track(
     // inliers (an exposure change is then not an intensity residual).
     let mut brightness = (1.0, 0.0);
     for level in (0..config.levels).rev() {
-        let ref_level = &reference.levels[level];
-        let points = &current.levels[level];
-        let mut last_cost_per_point = f64::INFINITY;
-        for _ in 0..config.iterations_at(level) {
-            let eq = normal_equations(ref_level, points, &estimate, brightness, config);
-            iterations += 1;
-            if config.estimate_brightness
-                && let Some((gain, bias)) = eq.brightness_fit(MIN_BRIGHTNESS_SAMPLES)
-            {
-                brightness = (gain.clamp(MIN_GAIN, 1.0 / MIN_GAIN), bias);
-            }
-            let cost_per_point = eq.cost / eq.correspondences.max(1) as f64;
-            if eq.correspondences < 6 {
-                finest = eq;
-                break;
-            }
-            let Some(step) = solve_step(&eq) else {
-                finest = eq;
-                break;
-            };
-            finest = eq;
-            let (dt, dw) = (step.0.norm(), step.1.norm());
-            if !(dt.is_finite() && dw.is_finite()) {
-                return Ok(failed(
-                    guess,
-                    OdometryFailure::Diverged {
-                        correction_m: f64::NAN,
-                        correction_deg: f64::NAN,
-                    },
-                ));
-            }
-            estimate = renormalized(
-                &(Isometry3::from_parts(
-                    Translation3::from(step.0),
-                    UnitQuaternion::from_scaled_axis(step.1),
-                ) * estimate),
-            );
-            let level_scale = f64::from(1u32 << level);
-            let converged = dt < config.convergence_translation_m * level_scale
-                && dw < config.convergence_rotation_rad * level_scale;
-            let stalled = cost_per_point > last_cost_per_point * (1.0 + 1e-9) && level > 0;
-            last_cost_per_point = cost_per_point;
-            if converged || stalled {
-                break;
-            }
-        }
+        let Some(aligned) = align_level(reference, current, level, estimate, brightness, config)
+        else {
+            return Ok(failed(
+                guess,
+                OdometryFailure::Diverged {
+                    correction_m: f64::NAN,
+                    correction_deg: f64::NAN,
+                },
+            ));
+        };
+        estimate = aligned.estimate;
+        brightness = aligned.brightness;
+        iterations += aligned.iterations;
+        finest = aligned.last;
     }
     // The information and statistics come from the last finest-level linearisation (one small
     // step before the final estimate: the step was below the convergence threshold or the
@@ -313,6 +271,172 @@ pub fn track(
         result.reference_from_current = guess;
     }
     Ok(result)
+}
+
+/// Checks that `reference` and `current` were prepared for `config` with one camera.
+fn check_inputs(
+    reference: &TrackingReference,
+    current: &SourceFrame,
+    config: &OdometryConfig,
+) -> Result<(), OdometryError> {
+    config.validate()?;
+    if reference.levels() < config.levels || current.levels.len() < config.levels {
+        return Err(OdometryError::Mismatch(format!(
+            "reference has {} levels, current frame {}, config wants {}",
+            reference.levels(),
+            current.levels.len(),
+            config.levels
+        )));
+    }
+    if reference.camera() != &current.camera {
+        return Err(OdometryError::Mismatch("the cameras differ".to_string()));
+    }
+    Ok(())
+}
+
+/// Where Gauss–Newton left one pyramid level.
+struct LevelAlignment {
+    estimate: Isometry3<f64>,
+    brightness: (f64, f64),
+    /// The level's last linearisation.
+    last: NormalEquations,
+    iterations: usize,
+}
+
+/// Gauss–Newton at pyramid `level` from `estimate` (and the brightness `(gain, bias)`), up to
+/// the level's iteration budget; `None` when a step went non-finite.
+fn align_level(
+    reference: &TrackingReference,
+    current: &SourceFrame,
+    level: usize,
+    mut estimate: Isometry3<f64>,
+    mut brightness: (f64, f64),
+    config: &OdometryConfig,
+) -> Option<LevelAlignment> {
+    let ref_level = &reference.levels[level];
+    let points = &current.levels[level];
+    let mut last_cost_per_point = f64::INFINITY;
+    let mut last = NormalEquations::default();
+    let mut iterations = 0;
+    for _ in 0..config.iterations_at(level) {
+        let eq = normal_equations(ref_level, points, &estimate, brightness, config);
+        iterations += 1;
+        if config.estimate_brightness
+            && let Some((gain, bias)) = eq.brightness_fit(MIN_BRIGHTNESS_SAMPLES)
+        {
+            brightness = (gain.clamp(MIN_GAIN, 1.0 / MIN_GAIN), bias);
+        }
+        let cost_per_point = eq.cost / eq.correspondences.max(1) as f64;
+        last = eq;
+        if eq.correspondences < 6 {
+            break;
+        }
+        let Some(step) = solve_step(&eq) else {
+            break;
+        };
+        let (dt, dw) = (step.0.norm(), step.1.norm());
+        if !(dt.is_finite() && dw.is_finite()) {
+            return None;
+        }
+        estimate = renormalized(
+            &(Isometry3::from_parts(
+                Translation3::from(step.0),
+                UnitQuaternion::from_scaled_axis(step.1),
+            ) * estimate),
+        );
+        let level_scale = f64::from(1u32 << level);
+        let converged = dt < config.convergence_translation_m * level_scale
+            && dw < config.convergence_rotation_rad * level_scale;
+        let stalled = cost_per_point > last_cost_per_point * (1.0 + 1e-9) && level > 0;
+        last_cost_per_point = cost_per_point;
+        if converged || stalled {
+            break;
+        }
+    }
+    Some(LevelAlignment {
+        estimate,
+        brightness,
+        last,
+        iterations,
+    })
+}
+
+/// Inliers of `current` against `reference` after Gauss–Newton at the coarsest level alone
+/// from `guess` (0 for a non-finite guess or a diverged step): a cheap score to rank initial
+/// guesses too far apart for one [`track`] to settle between them.
+fn coarse_inliers(
+    reference: &TrackingReference,
+    current: &SourceFrame,
+    guess: &Isometry3<f64>,
+    config: &OdometryConfig,
+) -> usize {
+    if !is_finite(guess) {
+        return 0;
+    }
+    align_level(
+        reference,
+        current,
+        config.levels - 1,
+        renormalized(guess),
+        (1.0, 0.0),
+        config,
+    )
+    .map_or(0, |aligned| aligned.last.inliers)
+}
+
+/// A [`track`] from the best of several initial guesses, where the state estimate is known only
+/// to within more than [`OdometryConfig::max_correction_m`] (after a gap in view, the estimate's
+/// position walks by up to metres, and a single guess that far out converges into a wrong
+/// minimum of the cost or diverges).
+#[derive(Debug, Clone, PartialEq)]
+pub struct MultiStartResult {
+    /// The result kept: the trusted one with the highest inlier ratio, or, when none was
+    /// trusted, the first start's.
+    pub result: OdometryResult,
+    /// Index in the starts of the one kept.
+    pub start: usize,
+}
+
+/// Tracks `current` against `reference` from each of `starts` (initial
+/// `reference_from_current`s; the first is the plain guess): every start is ranked by its
+/// inliers after Gauss–Newton at the coarsest level, the best `refine` of them and the first
+/// start are tracked in full ([`track`]), and the trusted result with the highest inlier ratio is
+/// kept (on a tie, the first start, then the better ranked). Deterministic for any thread count.
+///
+/// # Errors
+/// As [`track`]; an empty `starts` is [`OdometryError::Mismatch`].
+pub fn track_multi_start(
+    reference: &TrackingReference,
+    current: &SourceFrame,
+    starts: &[Isometry3<f64>],
+    refine: usize,
+    config: &OdometryConfig,
+) -> Result<MultiStartResult, OdometryError> {
+    check_inputs(reference, current, config)?;
+    if starts.is_empty() {
+        return Err(OdometryError::Mismatch(
+            "a multi-start track needs at least one start".to_string(),
+        ));
+    }
+    let scores: Vec<usize> = starts
+        .par_iter()
+        .map(|start| coarse_inliers(reference, current, start, config))
+        .collect();
+    let mut ranked: Vec<usize> = (1..starts.len()).collect();
+    ranked.sort_by_key(|&k| (std::cmp::Reverse(scores[k]), k));
+    let mut tracked = Vec::with_capacity(refine + 1);
+    for k in std::iter::once(0).chain(ranked.into_iter().take(refine)) {
+        tracked.push((k, track(reference, current, &starts[k], config)?));
+    }
+    let mut best = 0;
+    for (i, (_, result)) in tracked.iter().enumerate() {
+        let kept = &tracked[best].1;
+        if result.is_ok() && (!kept.is_ok() || result.inlier_ratio > kept.inlier_ratio) {
+            best = i;
+        }
+    }
+    let (start, result) = tracked.swap_remove(best);
+    Ok(MultiStartResult { result, start })
 }
 
 /// Tracks frame `current` against frame `reference` (frame-to-frame), building both pyramids.
@@ -469,6 +593,38 @@ mod tests {
         let r = track(&reference, &current, &nan, &config).unwrap();
         assert_eq!(r.failure, Some(OdometryFailure::NonFiniteInitialGuess));
         assert!(is_finite(&r.reference_from_current));
+    }
+
+    #[test]
+    fn a_multi_start_needs_a_start_and_keeps_the_first_of_equals() {
+        let camera = PinholeCamera::from_hfov(160, 120, 80.0).unwrap();
+        let config = OdometryConfig::default();
+        let gray = GrayImage::from_vec(
+            160,
+            120,
+            (0..160 * 120)
+                .map(|i| (((i % 160) / 9 + (i / 160) / 7) % 5) as f32 / 5.0)
+                .collect(),
+        )
+        .unwrap();
+        let full = pyramid(gray, DepthImage::filled(160, 120, 2.0), &config);
+        let reference = TrackingReference::from_pyramid(&camera, &full, &config).unwrap();
+        let current = SourceFrame::from_pyramid(&camera, &full, &config).unwrap();
+        assert!(matches!(
+            track_multi_start(&reference, &current, &[], 4, &config),
+            Err(OdometryError::Mismatch(_))
+        ));
+        let nan = Isometry3::translation(f64::NAN, 0.0, 0.0);
+        assert_eq!(coarse_inliers(&reference, &current, &nan, &config), 0);
+        let identity = Isometry3::identity();
+        assert!(coarse_inliers(&reference, &current, &identity, &config) > 0);
+        let single = track(&reference, &current, &identity, &config).unwrap();
+        let multi =
+            track_multi_start(&reference, &current, &[identity, identity], 4, &config).unwrap();
+        assert_eq!((multi.start, &multi.result), (0, &single));
+        // A failed first start gives way to a trusted one, whatever the order.
+        let multi = track_multi_start(&reference, &current, &[nan, identity], 1, &config).unwrap();
+        assert_eq!(multi.start, usize::from(single.is_ok()));
     }
 
     #[test]
