@@ -132,6 +132,13 @@ pub struct TargetRow {
     /// where reported.
     #[serde(default)]
     pub ring_drift_m: Option<f64>,
+    /// Mapped frames after a gap in view tracked from a search over the estimate's walk, where
+    /// reported.
+    #[serde(default)]
+    pub reacquisitions: Option<u64>,
+    /// Tracked frames whose odometry the map frame's gate refused, where reported.
+    #[serde(default)]
+    pub map_frame_refusals: Option<u64>,
     /// Collisions of the whole run.
     pub run_collisions: Option<u64>,
     /// Why it is not mapped or not analysed, from the mission.
@@ -395,6 +402,8 @@ pub fn read_run(
             center_error_estimate_frame_m: f(t, "center_error_estimate_frame_m"),
             min_clearance_m: f(t, "min_clearance_m").or(run_row.min_clearance_m),
             ring_drift_m: f(t, "ring_drift_m"),
+            reacquisitions: u(t, "reacquisitions"),
+            map_frame_refusals: u(t, "map_frame_refusals"),
             run_collisions: run_row.collisions,
             error: s(t, "error"),
         });
@@ -550,6 +559,20 @@ pub fn totals(runs: &[RunRow], targets: &[TargetRow]) -> Totals {
             counted
                 .iter()
                 .filter_map(|t| Some((t.ring_drift_m?, at(t)))),
+        ),
+        figure(
+            "re-acquisitions after a gap in view, per target",
+            true,
+            counted
+                .iter()
+                .filter_map(|t| Some((t.reacquisitions? as f64, at(t)))),
+        ),
+        figure(
+            "map frame refusals, per target",
+            true,
+            counted
+                .iter()
+                .filter_map(|t| Some((t.map_frame_refusals? as f64, at(t)))),
         ),
         figure(
             "α_min interval width (°)",
