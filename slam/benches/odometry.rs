@@ -91,17 +91,7 @@ fn bench(c: &mut Criterion) {
     });
     // A re-acquisition after 14 s out of view with the GPS walk's search (about 350 guesses),
     // the estimate having walked 1.1 m: a rare frame, not a per-frame cost.
-    let search = ReacquisitionSearch {
-        min_gap_s: 1.0,
-        horizontal_sigma_m: 0.5,
-        vertical_sigma_m: 0.8,
-        correlation_s: 30.0,
-        white_sigma_m: 0.03,
-        sigmas: 3.0,
-        step_m: 0.4,
-        max_starts: 1500,
-        refine_starts: 4,
-    };
+    let search = ReacquisitionSearch::for_walk(0.5, 0.8, 30.0, 0.03);
     let walked = Translation3::new(0.9, -0.6, 0.35) * guess;
     let starts: Vec<_> = search
         .offsets_m(14.0)

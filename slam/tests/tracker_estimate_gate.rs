@@ -2,10 +2,10 @@
 //! strays from the estimate's by more than the estimator could have drifted is dropped, rather
 //! than fused and kept as the reference of the frames after it.
 
+mod common;
+
 use nalgebra::{Isometry3, UnitQuaternion, Vector3};
-use scarp_datasets::paths::default_orbit;
 use scarp_datasets::render::Renderer;
-use scarp_datasets::world::World;
 use scarp_slam::mapping::{EstimateRotationGate, ModelTracker, ModelTrackingConfig};
 use scarp_slam::tsdf::{Roi, TsdfConfig};
 use scarp_slam::{PinholeCamera, RgbdFrame};
@@ -20,34 +20,24 @@ const ODD: usize = 3;
 /// vertical axis: an image the odometry tracks to a pose the estimate says is wrong, as a local
 /// minimum of the odometry would.
 fn frames() -> (PinholeCamera, Vec<(RgbdFrame, Isometry3<f64>)>, Roi) {
-    let world = World::builtin_default().unwrap();
-    let renderer = Renderer::new(&world);
-    let camera = PinholeCamera::from_hfov(320, 240, 80.0).unwrap();
-    let orbit = default_orbit(&world, 360).unwrap();
-    let target = world.targets().next().unwrap().centroid;
-    let roi = Roi::Cylinder {
-        center_xy: [target.x, target.y],
-        z_min: target.z - 3.0,
-        z_max: target.z + 3.0,
-        radius_m: 3.0,
-    };
+    let scene = common::orbit_scene();
+    let renderer = Renderer::new(&scene.world);
     let turn = UnitQuaternion::from_scaled_axis(Vector3::y() * TURN_DEG.to_radians());
-    let frames = orbit[..6]
+    let frames = scene.poses[..6]
         .iter()
         .enumerate()
-        .map(|(k, pose)| {
-            let truth = pose.world_from_camera;
+        .map(|(k, &(timestamp_s, truth))| {
             let seen_from = if k == ODD {
                 truth * Isometry3::from_parts(Default::default(), turn)
             } else {
                 truth
             };
-            let out = renderer.render(&camera, &seen_from).unwrap();
-            let frame = RgbdFrame::new(pose.timestamp_s, out.rgb, out.depth_m, None).unwrap();
+            let out = renderer.render(&scene.camera, &seen_from).unwrap();
+            let frame = RgbdFrame::new(timestamp_s, out.rgb, out.depth_m, None).unwrap();
             (frame, truth)
         })
         .collect();
-    (camera, frames, roi)
+    (scene.camera, frames, scene.roi)
 }
 
 fn tracker(

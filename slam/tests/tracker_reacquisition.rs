@@ -2,10 +2,10 @@
 //! one guess cannot reach the truth (the odometry corrects a guess by at most half a metre), a
 //! search over the estimate's walk does.
 
+mod common;
+
 use nalgebra::{Isometry3, Translation3, Vector3};
-use scarp_datasets::paths::default_orbit;
 use scarp_datasets::render::Renderer;
-use scarp_datasets::world::World;
 use scarp_slam::mapping::{ModelTracker, ModelTrackingConfig, ReacquisitionSearch};
 use scarp_slam::tsdf::{Roi, TsdfConfig};
 use scarp_slam::{PinholeCamera, RgbdFrame};
@@ -26,47 +26,29 @@ fn walk_m() -> Vector3<f64> {
 /// world's first target, with their true poses; the frames after the gap are stamped
 /// [`GAP_S`] later.
 fn frames() -> (PinholeCamera, Vec<(RgbdFrame, Isometry3<f64>)>, Roi) {
-    let world = World::builtin_default().unwrap();
-    let renderer = Renderer::new(&world);
-    let camera = PinholeCamera::from_hfov(320, 240, 80.0).unwrap();
-    let orbit = default_orbit(&world, 360).unwrap();
-    let target = world.targets().next().unwrap().centroid;
-    let roi = Roi::Cylinder {
-        center_xy: [target.x, target.y],
-        z_min: target.z - 3.0,
-        z_max: target.z + 3.0,
-        radius_m: 3.0,
-    };
-    let last_before_s = orbit[BEFORE - 1].timestamp_s;
+    let scene = common::orbit_scene();
+    let renderer = Renderer::new(&scene.world);
+    let orbit = &scene.poses;
+    let last_before_s = orbit[BEFORE - 1].0;
     let frames = (0..BEFORE)
         .chain([AFTER, AFTER + 1])
         .map(|k| {
-            let pose = &orbit[k];
-            let out = renderer.render(&camera, &pose.world_from_camera).unwrap();
+            let (stamp_s, truth) = orbit[k];
+            let out = renderer.render(&scene.camera, &truth).unwrap();
             let timestamp_s = if k < BEFORE {
-                pose.timestamp_s
+                stamp_s
             } else {
-                last_before_s + GAP_S + (pose.timestamp_s - orbit[AFTER].timestamp_s)
+                last_before_s + GAP_S + (stamp_s - orbit[AFTER].0)
             };
             let frame = RgbdFrame::new(timestamp_s, out.rgb, out.depth_m, None).unwrap();
-            (frame, pose.world_from_camera)
+            (frame, truth)
         })
         .collect();
-    (camera, frames, roi)
+    (scene.camera, frames, scene.roi)
 }
 
 fn gps_search() -> ReacquisitionSearch {
-    ReacquisitionSearch {
-        min_gap_s: 1.0,
-        horizontal_sigma_m: 0.5,
-        vertical_sigma_m: 0.8,
-        correlation_s: 30.0,
-        white_sigma_m: 0.02,
-        sigmas: 3.0,
-        step_m: 0.4,
-        max_starts: 600,
-        refine_starts: 4,
-    }
+    ReacquisitionSearch::for_walk(0.5, 0.8, 30.0, 0.02)
 }
 
 /// Tracks the frames with the estimate equal to the truth before the gap and walked by

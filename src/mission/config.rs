@@ -359,16 +359,13 @@ impl MappingConfig {
     ) -> Option<scarp_slam::mapping::ReacquisitionSearch> {
         (self.reacquisition_sigmas > 0.0).then(|| scarp_slam::mapping::ReacquisitionSearch {
             min_gap_s: self.reacquisition_min_gap_s,
-            horizontal_sigma_m: estimator.horizontal_sigma_m,
-            vertical_sigma_m: estimator.vertical_sigma_m,
-            correlation_s: estimator.position_correlation_s,
-            white_sigma_m: estimator.horizontal_white_m.max(estimator.vertical_white_m),
             sigmas: self.reacquisition_sigmas,
-            // Every point of the search lies within 0.35 m of a guess, inside the odometry's
-            // 0.5 m reach.
-            step_m: 0.4,
-            max_starts: 1500,
-            refine_starts: 4,
+            ..scarp_slam::mapping::ReacquisitionSearch::for_walk(
+                estimator.horizontal_sigma_m,
+                estimator.vertical_sigma_m,
+                estimator.position_correlation_s,
+                estimator.horizontal_white_m.max(estimator.vertical_white_m),
+            )
         })
     }
 }
