@@ -413,35 +413,20 @@ impl ModelTracker {
                     let gap_s = self
                         .previous_timestamp_s
                         .map_or(0.0, |previous| frame.timestamp_s - previous);
-                    let offsets_m = match &self.config.reacquisition {
-                        Some(search) if fuse_on_guess => search.offsets_m(gap_s),
-                        _ => Vec::new(),
-                    };
-                    let (result, reacquisition) = if offsets_m.len() > 1 {
-                        let reference_from_world = world_from_reference.inverse();
-                        let world_from_guess = world_from_previous * motion;
-                        let starts: Vec<Isometry3<f64>> = offsets_m
-                            .iter()
-                            .map(|o| {
-                                reference_from_world * Translation3::from(*o) * world_from_guess
-                            })
-                            .collect();
-                        let refine = self.config.reacquisition.map_or(0, |s| s.refine_starts);
-                        let multi = track_multi_start(
+                    let searched = if fuse_on_guess {
+                        self.reacquire(
                             reference,
                             &source,
-                            &starts,
-                            refine,
-                            odometry_config,
-                        )?;
-                        let reacquisition = Reacquisition {
+                            &world_from_reference,
+                            &(world_from_previous * motion),
                             gap_s,
-                            starts: starts.len(),
-                            offset_m: offsets_m[multi.start],
-                        };
-                        (multi.result, Some(reacquisition))
+                        )?
                     } else {
-                        (track(reference, &source, &guess, odometry_config)?, None)
+                        None
+                    };
+                    let (result, reacquisition) = match searched {
+                        Some((result, reacquisition)) => (result, Some(reacquisition)),
+                        None => (track(reference, &source, &guess, odometry_config)?, None),
                     };
                     let ms = started.elapsed().as_secs_f64() * 1e3;
                     let world_from_tracked = world_from_reference * result.reference_from_current;
@@ -561,6 +546,45 @@ impl ModelTracker {
             odometry_ms,
             integrate_ms,
         })
+    }
+
+    /// Tracks `source` against `reference` (at `world_from_reference`) from the grid of
+    /// guesses about `world_from_guess` that [`ModelTrackingConfig::reacquisition`] spans after
+    /// a gap of `gap_s` seconds; `None` (track from the one guess) without a search or when
+    /// the gap is too short for one.
+    fn reacquire(
+        &self,
+        reference: &TrackingReference,
+        source: &SourceFrame,
+        world_from_reference: &Isometry3<f64>,
+        world_from_guess: &Isometry3<f64>,
+        gap_s: f64,
+    ) -> Result<Option<(OdometryResult, Reacquisition)>, MappingError> {
+        let Some(search) = &self.config.reacquisition else {
+            return Ok(None);
+        };
+        let offsets_m = search.offsets_m(gap_s);
+        if offsets_m.len() < 2 {
+            return Ok(None);
+        }
+        let reference_from_world = world_from_reference.inverse();
+        let starts: Vec<Isometry3<f64>> = offsets_m
+            .iter()
+            .map(|o| reference_from_world * Translation3::from(*o) * world_from_guess)
+            .collect();
+        let multi = track_multi_start(
+            reference,
+            source,
+            &starts,
+            search.refine_starts,
+            &self.config.odometry,
+        )?;
+        let reacquisition = Reacquisition {
+            gap_s,
+            starts: starts.len(),
+            offset_m: offsets_m[multi.start],
+        };
+        Ok(Some((multi.result, reacquisition)))
     }
 
     /// How far the tracked motion since the previous frame turns from the state estimate's
