@@ -447,10 +447,11 @@ impl MappingSession {
                 frame.timestamp_s,
                 r.gap_s,
                 r.starts,
-                tracked.distrust_reason().map_or_else(
-                    || "re-acquired".to_string(),
-                    |why| format!("dropped, {why}")
-                ),
+                match (tracked.distrust_reason(), tracked.dropped) {
+                    (None, _) => "re-acquired".to_string(),
+                    (Some(why), true) => format!("dropped, {why}"),
+                    (Some(why), false) => format!("placed by the estimate, {why}"),
+                },
                 r.offset_m.norm(),
                 r.offset_m.x,
                 r.offset_m.y,

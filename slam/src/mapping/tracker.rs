@@ -390,6 +390,8 @@ impl ModelTracker {
                 Some(world_from_previous) => {
                     let started = Instant::now();
                     let motion = previous_from_current_guess.unwrap_or_else(Isometry3::identity);
+                    // Where the guess puts the frame: the previous one moved by the motion.
+                    let world_from_guess = world_from_previous * motion;
                     let source =
                         SourceFrame::from_pyramid(&self.camera, &pyramid, odometry_config)?;
                     // The reference, its pose, and the guess of `reference_from_current`: the model
@@ -410,16 +412,13 @@ impl ModelTracker {
                                 (&model, world_from_previous, motion)
                             }
                         };
-                    let gap_s = self
-                        .previous_timestamp_s
-                        .map_or(0.0, |previous| frame.timestamp_s - previous);
                     let searched = if fuse_on_guess {
                         self.reacquire(
                             reference,
                             &source,
                             &world_from_reference,
-                            &(world_from_previous * motion),
-                            gap_s,
+                            &world_from_guess,
+                            self.seconds_since_previous(frame),
                         )?
                     } else {
                         None
@@ -449,7 +448,7 @@ impl ModelTracker {
                         self.frames += 1;
                         return Ok(TrackedFrame {
                             index,
-                            world_from_camera: renormalized(&(world_from_previous * motion)),
+                            world_from_camera: renormalized(&world_from_guess),
                             odometry: Some(result),
                             fell_back: false,
                             fused: false,
@@ -465,7 +464,7 @@ impl ModelTracker {
                     let world_from_camera = if trusted {
                         world_from_tracked
                     } else {
-                        world_from_previous * motion
+                        world_from_guess
                     };
                     let covariance = trusted
                         .then(|| result.information.try_inverse())
@@ -587,6 +586,12 @@ impl ModelTracker {
         Ok(Some((multi.result, reacquisition)))
     }
 
+    /// Seconds from the previous kept frame to `frame`, by timestamp (0 for the first frame).
+    fn seconds_since_previous(&self, frame: &RgbdFrame) -> f64 {
+        self.previous_timestamp_s
+            .map_or(0.0, |previous| frame.timestamp_s - previous)
+    }
+
     /// How far the tracked motion since the previous frame turns from the state estimate's
     /// `previous_from_current_estimate` (`None`: no estimate, or no gate), when beyond the
     /// gate's tolerance for the time between the frames.
@@ -603,10 +608,7 @@ impl ModelTracker {
         let rotation_deg = (estimated.rotation.inverse() * tracked.rotation)
             .angle()
             .to_degrees();
-        let dt_s = self
-            .previous_timestamp_s
-            .map_or(0.0, |previous| frame.timestamp_s - previous);
-        let tolerance_deg = gate.tolerance_deg(dt_s);
+        let tolerance_deg = gate.tolerance_deg(self.seconds_since_previous(frame));
         (rotation_deg > tolerance_deg).then_some(EstimateDisagreement {
             rotation_deg,
             tolerance_deg,

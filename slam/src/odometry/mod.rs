@@ -418,12 +418,13 @@ pub fn track_multi_start(
             "a multi-start track needs at least one start".to_string(),
         ));
     }
-    let scores: Vec<usize> = starts
+    // The first start is tracked in full whatever its rank: only the others are scored.
+    let scores: Vec<usize> = starts[1..]
         .par_iter()
         .map(|start| coarse_inliers(reference, current, start, config))
         .collect();
     let mut ranked: Vec<usize> = (1..starts.len()).collect();
-    ranked.sort_by_key(|&k| (std::cmp::Reverse(scores[k]), k));
+    ranked.sort_by_key(|&k| (std::cmp::Reverse(scores[k - 1]), k));
     let mut tracked = Vec::with_capacity(refine + 1);
     for k in std::iter::once(0).chain(ranked.into_iter().take(refine)) {
         tracked.push((k, track(reference, current, &starts[k], config)?));
