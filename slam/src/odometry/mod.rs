@@ -77,6 +77,9 @@ pub enum OdometryError {
     /// Reference and current frame were prepared with different cameras or level counts.
     #[error("reference and current frame do not match: {0}")]
     Mismatch(String),
+    /// [`track_multi_start`] was given no start to track from.
+    #[error("a multi-start track needs at least one start; none was given")]
+    NoStarts,
     /// An image or camera error (size mismatch, bad intrinsics).
     #[error(transparent)]
     Input(#[from] SlamError),
@@ -404,7 +407,7 @@ pub struct MultiStartResult {
 /// kept (on a tie, the first start, then the better ranked). Deterministic for any thread count.
 ///
 /// # Errors
-/// As [`track`]; an empty `starts` is [`OdometryError::Mismatch`].
+/// As [`track`]; an empty `starts` is [`OdometryError::NoStarts`].
 pub fn track_multi_start(
     reference: &TrackingReference,
     current: &SourceFrame,
@@ -414,9 +417,7 @@ pub fn track_multi_start(
 ) -> Result<MultiStartResult, OdometryError> {
     check_inputs(reference, current, config)?;
     if starts.is_empty() {
-        return Err(OdometryError::Mismatch(
-            "a multi-start track needs at least one start".to_string(),
-        ));
+        return Err(OdometryError::NoStarts);
     }
     // The first start is tracked in full whatever its rank: only the others are scored.
     let scores: Vec<usize> = starts[1..]
@@ -613,7 +614,7 @@ mod tests {
         let current = SourceFrame::from_pyramid(&camera, &full, &config).unwrap();
         assert!(matches!(
             track_multi_start(&reference, &current, &[], 4, &config),
-            Err(OdometryError::Mismatch(_))
+            Err(OdometryError::NoStarts)
         ));
         let nan = Isometry3::translation(f64::NAN, 0.0, 0.0);
         assert_eq!(coarse_inliers(&reference, &current, &nan, &config), 0);
