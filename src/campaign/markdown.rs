@@ -159,12 +159,12 @@ pub fn render(report: &CampaignReport) -> String {
 
     let _ = writeln!(
         md,
-        "\n## Targets\n\n| world | seed | rock | shape | status | F@1cm | F@2cm | α_min (°) | truth (°) | error (°) | interval (°) | in | loc. error (m) | est.-frame (m) | centre, est.-frame (m) | min clearance (m) | collisions |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
+        "\n## Targets\n\n| world | seed | rock | shape | status | F@1cm | F@2cm | seen | α_min (°) | truth (°) | error (°) | interval (°) | in | loc. error (m) | est.-frame (m) | its vertical (m) | centre, est.-frame (m) | min clearance (m) | collisions |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
     );
     for r in &report.targets {
         let _ = writeln!(
             md,
-            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
             r.world,
             r.seed,
             r.rock_id,
@@ -172,6 +172,7 @@ pub fn render(report: &CampaignReport) -> String {
             r.status,
             num(r.fscore_1cm, 3),
             num(r.fscore_2cm, 3),
+            num(r.gt_visible_fraction, 2),
             num(r.alpha_min_deg, 2),
             num(r.alpha_min_gt_deg, 2),
             num(r.alpha_error_deg, 2),
@@ -186,6 +187,8 @@ pub fn render(report: &CampaignReport) -> String {
             },
             num(r.localization_error_m, 2),
             num(r.localization_error_estimate_frame_m, 2),
+            r.localization_vertical_estimate_frame_m
+                .map_or("–".into(), |v| format!("{v:+.2}")),
             match (r.center_error_estimate_frame_m, r.center_source.as_deref()) {
                 (Some(e), Some("scan")) => format!("{e:.2} (scan)"),
                 (e, _) => num(e, 2),

@@ -121,6 +121,17 @@ pub struct TargetRow {
     pub localization_error_m: Option<f64>,
     /// The same in the frame the vehicle flies in, where reported.
     pub localization_error_estimate_frame_m: Option<f64>,
+    /// The vertical of that error (C_e's height less the moved centroid's; + above it),
+    /// metres, where reported.
+    #[serde(default)]
+    pub localization_vertical_estimate_frame_m: Option<f64>,
+    /// The horizontal of that error, metres, where reported.
+    #[serde(default)]
+    pub localization_horizontal_estimate_frame_m: Option<f64>,
+    /// Fraction of the true rock's surface that the mapping views saw, where reported. The
+    /// F-scores are taken against that part only: a map of half a rock can score 1.
+    #[serde(default)]
+    pub gt_visible_fraction: Option<f64>,
     /// Where the catalogue puts the target (`scan` or `localization`), where reported.
     pub center_source: Option<String>,
     /// Distance from the catalogue's centre to the true centroid in the frame the vehicle
@@ -377,6 +388,13 @@ pub fn read_run(
         let truth = f(t, "alpha_min_gt_deg");
         let low = f(t, "alpha_min_low_deg");
         let high = f(t, "alpha_min_high_deg");
+        let offset = t
+            .get("localization_offset_estimate_frame_m")
+            .and_then(Value::as_array)
+            .and_then(|a| {
+                let v: Vec<f64> = a.iter().filter_map(Value::as_f64).collect();
+                (v.len() == 3 && v.iter().all(|x| x.is_finite())).then_some(v)
+            });
         rows.push(TargetRow {
             world: run.world.clone(),
             seed: run.seed,
@@ -398,6 +416,9 @@ pub fn read_run(
             },
             localization_error_m: f(t, "localization_error_m"),
             localization_error_estimate_frame_m: f(t, "localization_error_estimate_frame_m"),
+            localization_vertical_estimate_frame_m: offset.as_ref().map(|v| v[2]),
+            localization_horizontal_estimate_frame_m: offset.as_ref().map(|v| v[0].hypot(v[1])),
+            gt_visible_fraction: f(t, "gt_visible_fraction"),
             center_source: s(t, "center_source"),
             center_error_estimate_frame_m: f(t, "center_error_estimate_frame_m"),
             min_clearance_m: f(t, "min_clearance_m").or(run_row.min_clearance_m),
@@ -528,6 +549,13 @@ pub fn totals(runs: &[RunRow], targets: &[TargetRow]) -> Totals {
             flown.iter().filter_map(|t| Some((t.fscore_2cm?, at(t)))),
         ),
         figure(
+            "true rock surface seen by the mapping views (fraction)",
+            false,
+            flown
+                .iter()
+                .filter_map(|t| Some((t.gt_visible_fraction?, at(t)))),
+        ),
+        figure(
             "F@1cm",
             false,
             flown.iter().filter_map(|t| Some((t.fscore_1cm?, at(t)))),
@@ -545,6 +573,20 @@ pub fn totals(runs: &[RunRow], targets: &[TargetRow]) -> Totals {
             counted
                 .iter()
                 .filter_map(|t| Some((t.localization_error_estimate_frame_m?, at(t)))),
+        ),
+        figure(
+            "localization error, estimate frame, vertical (m; + = above the centroid)",
+            true,
+            counted
+                .iter()
+                .filter_map(|t| Some((t.localization_vertical_estimate_frame_m?, at(t)))),
+        ),
+        figure(
+            "localization error, estimate frame, horizontal (m)",
+            true,
+            counted
+                .iter()
+                .filter_map(|t| Some((t.localization_horizontal_estimate_frame_m?, at(t)))),
         ),
         figure(
             "catalogue centre error, estimate frame (m)",
@@ -712,7 +754,9 @@ mod tests {
                 {"id": 3, "status": "mapped", "gt_rock_id": 1, "gt_role": "target",
                  "fscore_1cm": 0.8, "fscore_2cm": 0.9, "alpha_min_deg": 5.0 + alpha,
                  "alpha_min_gt_deg": 5.0, "localization_error_m": 0.7,
-                 "alpha_min_low_deg": 4.0 + 0.9 * alpha, "alpha_min_high_deg": 6.0 + alpha},
+                 "alpha_min_low_deg": 4.0 + 0.9 * alpha, "alpha_min_high_deg": 6.0 + alpha,
+                 "gt_visible_fraction": 0.9 - 0.1 * alpha,
+                 "localization_offset_estimate_frame_m": [0.3, -0.4, 0.1 * alpha]},
                 {"id": 4, "status": "mapped", "gt_rock_id": 10, "gt_role": "distractor"},
             ],
         });
@@ -784,6 +828,10 @@ mod tests {
         assert_eq!(first.fscore_2cm, Some(0.9));
         assert_eq!(first.localization_error_m, Some(0.7));
         assert_eq!(first.min_clearance_m, Some(0.8 - 0.1));
+        assert_eq!(first.gt_visible_fraction, Some(0.9 - 0.1));
+        assert_eq!(first.localization_vertical_estimate_frame_m, Some(0.1));
+        assert!((first.localization_horizontal_estimate_frame_m.unwrap() - 0.5).abs() < 1e-12);
+        assert_eq!(rows[3].localization_vertical_estimate_frame_m, None);
         assert_eq!(rows[1].status, "missed");
         assert_eq!(rows[1].rock_id, 2);
         assert_eq!(rows[2].alpha_error_deg, Some(3.5));
@@ -820,6 +868,21 @@ mod tests {
         assert_eq!(abs.worst, Some(3.5));
         assert_eq!(abs.worst_at.as_deref(), Some("runs/w/seed-1#rock-1"));
         assert_eq!(abs.median, Some(2.25));
+        let seen = t
+            .figures
+            .iter()
+            .find(|f| f.name.starts_with("true rock surface seen"))
+            .unwrap();
+        // The seed-1 mesh saw the least: 0.9 − 0.35; rock 2's refused flight reports none.
+        assert_eq!(seen.n, 2);
+        assert!((seen.worst.unwrap() - 0.55).abs() < 1e-12);
+        assert_eq!(seen.worst_at.as_deref(), Some("runs/w/seed-1#rock-1"));
+        let vertical = t
+            .figures
+            .iter()
+            .find(|f| f.name.contains("vertical"))
+            .unwrap();
+        assert!((vertical.worst.unwrap() - 0.35).abs() < 1e-12);
         let clearance = t
             .figures
             .iter()

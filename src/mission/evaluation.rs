@@ -77,7 +77,18 @@ pub fn estimate_frame_error_m(
     true_centroid: &Point3<f64>,
     estimator_error_m: &Vector3<f64>,
 ) -> f64 {
-    (true_centroid + estimator_error_m - center).norm()
+    estimate_frame_offset_m(center, true_centroid, estimator_error_m).norm()
+}
+
+/// The localized centre less the true centroid moved by the estimator's mean position error
+/// (estimate − truth), ENU metres: [`estimate_frame_error_m`] as a vector, so that its
+/// vertical (z, + above the rock's centroid) can be told from its horizontal.
+pub fn estimate_frame_offset_m(
+    center: &Point3<f64>,
+    true_centroid: &Point3<f64>,
+    estimator_error_m: &Vector3<f64>,
+) -> Vector3<f64> {
+    center - (true_centroid + estimator_error_m)
 }
 
 /// Fills each target's `gt_rock_id` and `gt_role` (the true rock nearest its `center`), the
@@ -101,6 +112,11 @@ pub fn ground_truth_summary(world: &World, targets: &mut Catalog, report: &mut M
                 };
                 r.localization_error_estimate_frame_m =
                     in_estimate_frame(&localized, r.estimator_error_at_localization_m);
+                r.localization_offset_estimate_frame_m =
+                    r.estimator_error_at_localization_m.map(|e| {
+                        estimate_frame_offset_m(&localized, &rock.centroid, &Vector3::from(e))
+                            .into()
+                    });
                 r.center_error_estimate_frame_m = if r.center_source == CENTER_FROM_SCAN {
                     in_estimate_frame(&center, r.estimator_error_over_keyframes_m)
                 } else {
@@ -113,6 +129,7 @@ pub fn ground_truth_summary(world: &World, targets: &mut Catalog, report: &mut M
                 r.center_error_m = None;
                 r.localization_error_m = None;
                 r.localization_error_estimate_frame_m = None;
+                r.localization_offset_estimate_frame_m = None;
                 r.center_error_estimate_frame_m = None;
             }
         }
@@ -207,6 +224,14 @@ mod tests {
             (in_estimate_frame - 0.18f64.sqrt()).abs() < 1e-9,
             "{in_estimate_frame}"
         );
+        // The same error as a vector, its vertical signed: 0.1 m below the rock's centroid.
+        let offset = targets[&1]
+            .report
+            .localization_offset_estimate_frame_m
+            .unwrap();
+        for (got, want) in offset.iter().zip([0.1, -0.4, -0.1]) {
+            assert!((got - want).abs() < 1e-9, "{offset:?}");
+        }
         let scanned = &targets[&1].report;
         assert!((scanned.center_error_m.unwrap() - 0.0029f64.sqrt()).abs() < 1e-9);
         assert!((scanned.center_error_estimate_frame_m.unwrap() - 0.01).abs() < 1e-9);
@@ -214,6 +239,10 @@ mod tests {
         let unscanned = &targets[&2].report;
         assert_eq!(unscanned.center_error_m, unscanned.localization_error_m);
         assert_eq!(targets[&3].report.localization_error_estimate_frame_m, None);
+        assert_eq!(
+            targets[&3].report.localization_offset_estimate_frame_m,
+            None
+        );
         assert_eq!(targets[&2].report.gt_role.as_deref(), Some("distractor"));
         assert_eq!(targets[&4].report.gt_rock_id, None);
         assert_eq!(report.distractors_mapped, 1);

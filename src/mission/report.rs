@@ -97,6 +97,10 @@ pub struct TargetReport {
     /// in the frame the vehicle flies in, metres.
     #[serde(default)]
     pub localization_error_estimate_frame_m: Option<f64>,
+    /// That error as a vector: C_e less the true centroid moved by the mean error, ENU
+    /// metres. Its z tells a centre left above the rock (+) from one sunk into it (−).
+    #[serde(default)]
+    pub localization_offset_estimate_frame_m: Option<[f64; 3]>,
     /// The state estimator's mean position error (estimate − truth, ENU metres) over the
     /// keyframes of the target's map: the frame its scan, and a `"scan"` centre, are in
     /// (ground truth).
