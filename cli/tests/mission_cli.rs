@@ -56,6 +56,22 @@ fn small_world_mission_finds_maps_and_measures_its_target() {
     let t = flown[0];
     assert_eq!(t["gt_rock_id"], 1, "{t:#}");
     assert!(t["localization_error_m"].as_f64().unwrap() <= 2.0, "{t:#}");
+    // The vector of the estimate-frame error has that error's length, and the filter states
+    // its own spread about C_e on every axis.
+    let offset: Vec<f64> = t["localization_offset_estimate_frame_m"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    let length = offset.iter().map(|v| v * v).sum::<f64>().sqrt();
+    let error = t["localization_error_estimate_frame_m"].as_f64().unwrap();
+    assert!((length - error).abs() < 1e-9, "{t:#}");
+    let sigma = t["localized_sigma_m"].as_array().unwrap();
+    assert!(
+        sigma.len() == 3 && sigma.iter().all(|s| s.as_f64().unwrap() > 0.0),
+        "{t:#}"
+    );
     assert!(t["coverage"].as_f64().unwrap() >= 0.7, "{t:#}");
     assert!(t["fscore_2cm"].as_f64().unwrap() >= 0.5, "{t:#}");
     assert!(t["gt_visible_fraction"].as_f64().unwrap() > 0.3, "{t:#}");

@@ -125,6 +125,9 @@ pub struct TargetRow {
     /// metres, where reported.
     #[serde(default)]
     pub localization_vertical_estimate_frame_m: Option<f64>,
+    /// The depth filter's own vertical spread (1σ) about C_e, metres, where reported.
+    #[serde(default)]
+    pub localization_sigma_z_m: Option<f64>,
     /// The horizontal of that error, metres, where reported.
     #[serde(default)]
     pub localization_horizontal_estimate_frame_m: Option<f64>,
@@ -418,6 +421,11 @@ pub fn read_run(
             localization_error_estimate_frame_m: f(t, "localization_error_estimate_frame_m"),
             localization_vertical_estimate_frame_m: offset.as_ref().map(|v| v[2]),
             localization_horizontal_estimate_frame_m: offset.as_ref().map(|v| v[0].hypot(v[1])),
+            localization_sigma_z_m: t
+                .get("localized_sigma_m")
+                .and_then(|s| s.get(2))
+                .and_then(Value::as_f64)
+                .filter(|s| s.is_finite() && *s > 0.0),
             gt_visible_fraction: f(t, "gt_visible_fraction"),
             center_source: s(t, "center_source"),
             center_error_estimate_frame_m: f(t, "center_error_estimate_frame_m"),
@@ -580,6 +588,23 @@ pub fn totals(runs: &[RunRow], targets: &[TargetRow]) -> Totals {
             counted
                 .iter()
                 .filter_map(|t| Some((t.localization_vertical_estimate_frame_m?, at(t)))),
+        ),
+        figure(
+            "|vertical localization error| in the filter's own σ_z",
+            true,
+            counted.iter().filter_map(|t| {
+                Some((
+                    t.localization_vertical_estimate_frame_m?.abs() / t.localization_sigma_z_m?,
+                    at(t),
+                ))
+            }),
+        ),
+        figure(
+            "localization filter's own σ_z (m)",
+            true,
+            counted
+                .iter()
+                .filter_map(|t| Some((t.localization_sigma_z_m?, at(t)))),
         ),
         figure(
             "localization error, estimate frame, horizontal (m)",
@@ -756,7 +781,8 @@ mod tests {
                  "alpha_min_gt_deg": 5.0, "localization_error_m": 0.7,
                  "alpha_min_low_deg": 4.0 + 0.9 * alpha, "alpha_min_high_deg": 6.0 + alpha,
                  "gt_visible_fraction": 0.9 - 0.1 * alpha,
-                 "localization_offset_estimate_frame_m": [0.3, -0.4, 0.1 * alpha]},
+                 "localization_offset_estimate_frame_m": [0.3, -0.4, 0.1 * alpha],
+                 "localized_sigma_m": [0.4, 0.4, 0.5]},
                 {"id": 4, "status": "mapped", "gt_rock_id": 10, "gt_role": "distractor"},
             ],
         });
@@ -883,6 +909,15 @@ mod tests {
             .find(|f| f.name.contains("vertical"))
             .unwrap();
         assert!((vertical.worst.unwrap() - 0.35).abs() < 1e-12);
+        let in_sigma = t
+            .figures
+            .iter()
+            .find(|f| f.name.contains("own σ_z"))
+            .unwrap();
+        assert!(
+            (in_sigma.worst.unwrap() - 0.7).abs() < 1e-12,
+            "0.35 m over σ_z 0.5 m"
+        );
         let clearance = t
             .figures
             .iter()

@@ -8,6 +8,7 @@ use nalgebra::Point3;
 use scarp_planning::prelude::VerticalCylinder;
 use serde::{Deserialize, Serialize};
 
+use super::perception::TargetState;
 use super::report::TargetReport;
 
 /// Where a target is in the mission.
@@ -88,6 +89,13 @@ impl MissionTarget {
                 report
             },
         }
+    }
+
+    /// Takes the depth filter's current C_e, its spread and its horizontal covariance.
+    pub fn follow_filter(&mut self, state: &TargetState) {
+        self.report.set_localized_center(&state.center);
+        self.report.localized_sigma_m = Some(state.sigma_m);
+        self.covariance_xy = Some(state.covariance_xy);
     }
 
     /// Sets the status in both places it is kept.

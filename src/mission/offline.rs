@@ -221,7 +221,7 @@ pub fn process_flight(inputs: &ProcessInputs<'_>) -> MissionResult<MissionReport
     for state in perception.target_states() {
         let t_found = found_at.get(&state.id).copied().unwrap_or(0.0);
         let mut target = MissionTarget::new(state.id, &state.center, t_found);
-        target.covariance_xy = Some(state.covariance_xy);
+        target.follow_filter(&state);
         target.report.localization_converged = state.converged;
         target.set_status(if state.ready_for_fine_localization || state.converged {
             TargetStatus::Localized
@@ -237,8 +237,7 @@ pub fn process_flight(inputs: &ProcessInputs<'_>) -> MissionResult<MissionReport
             .entry(state.id)
             .or_insert_with(|| MissionTarget::new(state.id, &state.center, t_found));
         // The row describes the localization the map was planned from.
-        target.report.set_localized_center(&state.center);
-        target.covariance_xy = Some(state.covariance_xy);
+        target.follow_filter(state);
         target.report.localization_converged = state.converged;
         target.set_status(TargetStatus::Mapping);
     }

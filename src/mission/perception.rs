@@ -43,6 +43,9 @@ pub struct TargetState {
     pub converged: bool,
     /// Horizontal covariance `[σxx, σxy, σyy]`, m².
     pub covariance_xy: [f64; 3],
+    /// Spread of the point set along each ENU axis (1σ), metres: how far the filter itself
+    /// says `center` may be off.
+    pub sigma_m: [f64; 3],
 }
 
 /// Median measured depth over the central half of a box (sampled on a grid), metres; `None`
@@ -378,6 +381,7 @@ impl Perception {
             ready_for_fine_localization: target.status() != FilterStatus::Tracking,
             converged: target.status() == FilterStatus::Converged,
             covariance_xy: [c[(0, 0)], c[(0, 1)], c[(1, 1)]],
+            sigma_m: [0, 1, 2].map(|i| c[(i, i)].max(0.0).sqrt()),
         }
     }
 

@@ -29,6 +29,10 @@ pub struct TargetReport {
     /// The localized centre C_e the mission planned its flight around, world ENU metres.
     #[serde(default)]
     pub localized_center: [f64; 3],
+    /// The spread (1σ along east, north, up; metres) of the depth filter's point set whose
+    /// mean is C_e: the filter's own statement of how far C_e may be off.
+    #[serde(default)]
+    pub localized_sigma_m: Option<[f64; 3]>,
     /// Axis of the bounding cylinder flown around it (x, y), world ENU metres: C_e, or where
     /// the first mapped frame's box saw the target (`mapping.recenter_on_first_frame`), in the
     /// map's frame.

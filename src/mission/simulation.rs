@@ -622,8 +622,7 @@ impl<'a> Mission<'a> {
             if let Some(m) = self.targets.get_mut(&state.id)
                 && m.status.follows_filter()
             {
-                m.report.set_localized_center(&state.center);
-                m.covariance_xy = Some(state.covariance_xy);
+                m.follow_filter(state);
             }
         }
         Ok(())
