@@ -108,17 +108,14 @@ pub fn ground_truth_summary(world: &World, targets: &mut Catalog, report: &mut M
                 r.center_error_m = Some(distance);
                 r.localization_error_m = Some((localized - rock.centroid).norm());
                 let in_estimate_frame = |at: &Point3<f64>, error: Option<[f64; 3]>| {
-                    error.map(|e| estimate_frame_error_m(at, &rock.centroid, &Vector3::from(e)))
+                    error.map(|e| estimate_frame_offset_m(at, &rock.centroid, &Vector3::from(e)))
                 };
-                r.localization_error_estimate_frame_m =
+                let localization_offset =
                     in_estimate_frame(&localized, r.estimator_error_at_localization_m);
-                r.localization_offset_estimate_frame_m =
-                    r.estimator_error_at_localization_m.map(|e| {
-                        estimate_frame_offset_m(&localized, &rock.centroid, &Vector3::from(e))
-                            .into()
-                    });
+                r.localization_offset_estimate_frame_m = localization_offset.map(Into::into);
+                r.localization_error_estimate_frame_m = localization_offset.map(|v| v.norm());
                 r.center_error_estimate_frame_m = if r.center_source == CENTER_FROM_SCAN {
-                    in_estimate_frame(&center, r.estimator_error_over_keyframes_m)
+                    in_estimate_frame(&center, r.estimator_error_over_keyframes_m).map(|v| v.norm())
                 } else {
                     r.localization_error_estimate_frame_m
                 };
