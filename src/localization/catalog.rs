@@ -4,9 +4,11 @@
 
 use nalgebra::{Isometry3, Point3};
 use scarp_slam::PinholeCamera;
+use scarp_slam::image::DepthImage;
 use serde::{Deserialize, Serialize};
 
 use super::cone::BoxCone;
+use super::free_space::FreeSpace;
 use super::keyframe::is_keyframe;
 use super::points::generate_points;
 use super::target::{Target, TargetStatus};
@@ -118,7 +120,34 @@ impl TargetCatalog {
         boxes: &[(u64, BoundingBox)],
         rng: &mut R,
     ) -> Result<ObserveReport, LocalizationError> {
+        self.observe_with_depth(camera, world_from_camera, boxes, None, rng)
+    }
+
+    /// [`Self::observe`] with the frame's depth image (metres along the camera's z axis, 0
+    /// where nothing was measured, `camera`'s size): updates also weigh each point by whether
+    /// the depth leaves it possible ([`super::free_space`], with the configured
+    /// `free_space_*` tolerances). With `None`, or `free_space_weight` = 1, this is
+    /// [`Self::observe`].
+    ///
+    /// # Errors
+    /// As [`Self::observe`]; also a depth image whose size is not the camera's.
+    pub fn observe_with_depth<R: rand::Rng + ?Sized>(
+        &mut self,
+        camera: &PinholeCamera,
+        world_from_camera: &Isometry3<f64>,
+        boxes: &[(u64, BoundingBox)],
+        depth_m: Option<&DepthImage>,
+        rng: &mut R,
+    ) -> Result<ObserveReport, LocalizationError> {
         camera.validate()?;
+        if let Some(depth) = depth_m
+            && (depth.width(), depth.height()) != (camera.width, camera.height)
+        {
+            return Err(LocalizationError::DepthSize {
+                depth: (depth.width(), depth.height()),
+                camera: (camera.width, camera.height),
+            });
+        }
         check_pose(world_from_camera, "world_from_camera")?;
         for (index, (_, bbox)) in boxes.iter().enumerate() {
             check_box(bbox, index, camera.width, camera.height)?;
@@ -200,11 +229,26 @@ impl TargetCatalog {
                             gaussian_weight: cfg.gaussian_weight,
                             uniform_weight: cfg.uniform_weight,
                         };
+                        let free_space =
+                            depth_m
+                                .filter(|_| cfg.free_space_weight < 1.0)
+                                .map(|depth| {
+                                    FreeSpace::new(
+                                        camera,
+                                        depth,
+                                        world_from_camera,
+                                        &enlarged[bi],
+                                        cfg.free_space_margin_m,
+                                        cfg.free_space_margin_per_m,
+                                        cfg.free_space_weight,
+                                    )
+                                });
                         match update_points(
                             &t.points,
                             camera,
                             world_from_camera,
                             &likelihood,
+                            free_space.as_ref(),
                             cfg.update_noise_sigma_m,
                             rng,
                         ) {
@@ -307,6 +351,7 @@ impl TargetCatalog {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::localization::test_scenes::sphere_on_ground;
     use nalgebra::{Point2, Vector3};
     use rand::SeedableRng;
     use rand::rngs::Xoshiro256PlusPlus;
@@ -355,6 +400,64 @@ mod tests {
         assert!((t.center() - rock).norm() < 0.3, "{}", t.center());
         assert_eq!(t.status(), TargetStatus::Converged);
         assert!(t.entropy_nats() < 3.0);
+    }
+
+    /// A sphere on the ground seen from 45° above it, with the depth each view measures. From
+    /// a 24° arc, the boxes' cones meet in a sliver metres long along the line of sight; the
+    /// depth carves the free space in front of the sphere and the ground behind it, so the
+    /// point set shrinks to the sphere. From a full circle, the depth keeps the centre where
+    /// the boxes put it.
+    #[test]
+    fn depth_evidence_shrinks_the_point_set_to_the_rock() {
+        let cam = PinholeCamera::from_hfov(160, 120, 80.0).unwrap();
+        let (rock, radius) = (Point3::new(3.0, -2.0, 0.7), 0.7);
+        let n = 60;
+        // The centre's error and the set's 1σ along the mean line of sight (+x), m.
+        let run = |free_space_weight: f64, views: usize| {
+            // The rendered depth has no noise.
+            let config = LocalizationConfig {
+                free_space_weight,
+                free_space_margin_per_m: 0.0,
+                ..Default::default()
+            };
+            let mut catalog = TargetCatalog::new(config).unwrap();
+            let mut rng = Xoshiro256PlusPlus::seed_from_u64(5);
+            for k in 0..views {
+                let pose = circle_pose(&rock, (k + n - views / 2) % n, n);
+                let depth = sphere_on_ground(&cam, &pose, &rock, radius);
+                let bbox = sphere_box(&cam, &pose, &rock, radius);
+                catalog
+                    .observe_with_depth(&cam, &pose, &[(7, bbox)], Some(&depth), &mut rng)
+                    .unwrap();
+            }
+            let t = &catalog.targets()[0];
+            ((t.center() - rock).norm(), t.covariance()[(0, 0)].sqrt())
+        };
+        let (arc_box_error, arc_box_sigma) = run(1.0, 5);
+        let (arc_depth_error, arc_depth_sigma) = run(0.05, 5);
+        // What is left is the sphere and its shadow, the ground behind it that no view of the
+        // arc sees.
+        assert!(
+            arc_box_sigma > 2.0 && arc_depth_sigma < 0.3 * arc_box_sigma,
+            "σ along the line of sight: {arc_box_sigma} m from boxes, {arc_depth_sigma} m with depth"
+        );
+        assert!(
+            arc_depth_error < arc_box_error,
+            "centre {arc_depth_error} m off with depth, {arc_box_error} m from boxes"
+        );
+        let (circle_error, _) = run(0.05, n);
+        assert!(circle_error < 0.15, "centre {circle_error} m off");
+        // The depth must match the camera.
+        let mut catalog = TargetCatalog::new(LocalizationConfig::default()).unwrap();
+        let small = DepthImage::filled(80, 60, 0.0);
+        let pose = circle_pose(&rock, 0, n);
+        let bbox = sphere_box(&cam, &pose, &rock, radius);
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(5);
+        let err = catalog
+            .observe_with_depth(&cam, &pose, &[(7, bbox)], Some(&small), &mut rng)
+            .unwrap_err();
+        assert!(err.to_string().contains("80×60"), "{err}");
+        assert!(catalog.targets().is_empty());
     }
 
     /// A state estimate whose error walks: the filter converges on a circle flown with one

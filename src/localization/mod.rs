@@ -6,7 +6,9 @@
 //! the cone of the enlarged box between the near and far depth ([`points`]). A box whose cone
 //! holds points of a target ([`cone`], the four inward half-spaces N·L > 0) updates that target
 //! on keyframes: every point is noised, weighted by where its projection falls with respect to
-//! the box, and the noised points are resampled ([`update`]). A Gaussian fit of the set gives
+//! the box and, when the frame has depth, by whether the depth leaves them possible (not in
+//! the free space in front of a measured surface, not under the ground: [`free_space`]), and
+//! the noised points are resampled ([`update`]). A Gaussian fit of the set gives
 //! the centre, the PCA ellipsoid, λ_max, the KL divergence between successive fits and the
 //! differential entropy ([`gaussian`]), which drive each target's status ([`target`]). The
 //! [`catalog`] keeps the targets, removes false ones with hit and miss counters and merges
@@ -37,10 +39,13 @@
 pub mod catalog;
 pub mod cone;
 pub mod config;
+pub mod free_space;
 pub mod gaussian;
 pub mod keyframe;
 pub mod points;
 pub mod target;
+#[cfg(test)]
+pub(crate) mod test_scenes;
 pub mod update;
 
 pub use catalog::{ObserveReport, TargetCatalog};
@@ -95,6 +100,14 @@ pub enum LocalizationError {
     /// The camera intrinsics are unusable.
     #[error("camera: {0}")]
     Camera(#[from] scarp_slam::SlamError),
+    /// The depth image given with a frame is not the camera's size.
+    #[error("the depth image is {}×{} px but the camera's image is {}×{} px", depth.0, depth.1, camera.0, camera.1)]
+    DepthSize {
+        /// Depth image width and height, px.
+        depth: (u32, u32),
+        /// Camera image width and height, px.
+        camera: (u32, u32),
+    },
     /// Too few or non-finite points for a Gaussian fit.
     #[error("a Gaussian fit needs at least 2 finite points, got {count}")]
     TooFewPoints {

@@ -1,12 +1,14 @@
 //! The point update (paper Algorithm 3 with DESIGN.md's fix): noise every point, weight the
-//! noised points by where they project with respect to the box, and resample those same noised
-//! points with low-variance (systematic) resampling.
+//! noised points by where they project with respect to the box (and, when the frame has depth,
+//! by whether the depth leaves them possible: [`super::free_space`]), and resample those same
+//! noised points with low-variance (systematic) resampling.
 
 use nalgebra::{Isometry3, Point2, Point3, Vector3};
 use rand::RngExt;
 use rand_distr::{Distribution, StandardNormal};
 use scarp_slam::PinholeCamera;
 
+use super::free_space::FreeSpace;
 use crate::detection::BoundingBox;
 
 /// The mixture weights of the point update.
@@ -69,8 +71,9 @@ pub fn low_variance_resample<R: rand::Rng + ?Sized>(
 
 /// One update of a target's `points` (world, m) with a box seen by `camera` at
 /// `world_from_camera`: every point gets isotropic Gaussian noise of `noise_sigma_m`, the noised
-/// points are weighted by `likelihood` at their projections (zero behind the camera), and
-/// `points.len()` of those noised points are resampled by weight.
+/// points are weighted by `likelihood` at their projections (zero behind the camera) times the
+/// depth's factor when `free_space` is given, and `points.len()` of those noised points are
+/// resampled by weight.
 ///
 /// Returns `None`, leaving nothing changed for the caller, when no noised point has any weight
 /// (the box and the points disagree completely).
@@ -79,6 +82,7 @@ pub fn update_points<R: rand::Rng + ?Sized>(
     camera: &PinholeCamera,
     world_from_camera: &Isometry3<f64>,
     likelihood: &BoxLikelihood,
+    free_space: Option<&FreeSpace<'_>>,
     noise_sigma_m: f64,
     rng: &mut R,
 ) -> Option<Vec<Point3<f64>>> {
@@ -92,9 +96,9 @@ pub fn update_points<R: rand::Rng + ?Sized>(
             StandardNormal.sample(rng),
         ) * noise_sigma_m;
         let q = p + noise;
-        let weight = camera
-            .project(&(camera_from_world * q))
-            .map_or(0.0, |px| likelihood.density(&px));
+        let weight = camera.project(&(camera_from_world * q)).map_or(0.0, |px| {
+            likelihood.density(&px) * free_space.map_or(1.0, |f| f.factor(&q, &px))
+        });
         noised.push(q);
         weights.push(weight);
     }
@@ -159,7 +163,16 @@ mod tests {
         };
         let run = |seed| {
             let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
-            update_points(&points, &cam, &Isometry3::identity(), &l, 0.1, &mut rng).unwrap()
+            update_points(
+                &points,
+                &cam,
+                &Isometry3::identity(),
+                &l,
+                None,
+                0.1,
+                &mut rng,
+            )
+            .unwrap()
         };
         let out = run(4);
         assert_eq!(out, run(4));
@@ -176,7 +189,16 @@ mod tests {
         };
         let mut rng = Xoshiro256PlusPlus::seed_from_u64(1);
         assert!(
-            update_points(&points, &cam, &Isometry3::identity(), &l_off, 0.1, &mut rng).is_none()
+            update_points(
+                &points,
+                &cam,
+                &Isometry3::identity(),
+                &l_off,
+                None,
+                0.1,
+                &mut rng
+            )
+            .is_none()
         );
     }
 }

@@ -84,8 +84,8 @@ pub fn median_depth_in_box(
 }
 
 /// Height above the lowest points in a box (the ground at the rock's foot) from which depth
-/// points count as the target, metres.
-const ABOVE_GROUND_M: f64 = 0.25;
+/// points count as the target, metres: the depth filter's ground band.
+const ABOVE_GROUND_M: f64 = crate::localization::free_space::GROUND_BAND_M;
 
 /// Fewest target points [`center_in_box`] accepts.
 const MIN_TARGET_POINTS: usize = 30;
@@ -337,9 +337,13 @@ impl Perception {
             camera,
             self.catalog.config().max_depth_m,
         );
-        let observed = self
-            .catalog
-            .observe(camera, world_from_camera, &boxes, &mut self.rng)?;
+        let observed = self.catalog.observe_with_depth(
+            camera,
+            world_from_camera,
+            &boxes,
+            Some(&frame.depth_m),
+            &mut self.rng,
+        )?;
         tracing::debug!(
             "t = {:.2} s: {} detections, {} candidates, {} boxes to the filter; {:?}",
             frame.timestamp_s,
@@ -467,7 +471,8 @@ pub fn boxes_for_filter(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use nalgebra::{Point2, Vector3};
+    use crate::localization::test_scenes::sphere_on_ground;
+    use nalgebra::Vector3;
     use scarp_slam::geometry::look_at;
     use scarp_slam::image::DepthImage;
 
@@ -494,36 +499,6 @@ mod tests {
             .to_string();
         assert!(error.contains("/nonexistent/yolo.onnx"), "{error}");
         assert!(toml::from_str::<MissionConfig>("[detection]\ndetector = \"yolo\"").is_err());
-    }
-
-    /// z-depth of a sphere standing on the ground plane z = 0, ray-cast from `pose`.
-    fn sphere_on_ground(
-        camera: &PinholeCamera,
-        pose: &Isometry3<f64>,
-        center: &Point3<f64>,
-        radius: f64,
-    ) -> DepthImage {
-        let mut depth = DepthImage::filled(camera.width, camera.height, 0.0);
-        let eye = pose.translation.vector;
-        for v in 0..camera.height {
-            for u in 0..camera.width {
-                let ray_camera = camera.unproject(&Point2::new(f64::from(u), f64::from(v)), 1.0);
-                let ray = pose.rotation * ray_camera.coords;
-                let oc = eye - center.coords;
-                let (b, c) = (oc.dot(&ray), oc.norm_squared() - radius * radius);
-                let a = ray.norm_squared();
-                let disc = b * b - a * c;
-                let sphere_t = (disc >= 0.0)
-                    .then(|| (-b - disc.sqrt()) / a)
-                    .filter(|t| *t > 0.0);
-                let ground_t = (ray.z < 0.0).then(|| -eye.z / ray.z);
-                // The ray is scaled so that t is the z-depth.
-                if let Some(t) = sphere_t.or(ground_t) {
-                    *depth.get_mut(u, v).unwrap() = t as f32;
-                }
-            }
-        }
-        depth
     }
 
     #[test]
