@@ -59,15 +59,7 @@ fn bench_update(c: &mut Criterion) {
     });
     // The second view sees a wall 10 m ahead along its axis.
     let depth = DepthImage::filled(camera.width, camera.height, 10.0);
-    let free_space = FreeSpace::new(
-        &camera,
-        &depth,
-        &second,
-        &likelihood.enlarged,
-        cfg.free_space_margin_m,
-        cfg.free_space_margin_per_m,
-        cfg.free_space_weight,
-    );
+    let free_space = FreeSpace::new(&camera, &depth, &second, &bbox, &cfg);
     c.bench_function("update_2000_points_with_depth", |b| {
         b.iter(|| {
             update_points(

@@ -233,15 +233,7 @@ impl TargetCatalog {
                             depth_m
                                 .filter(|_| cfg.free_space_weight < 1.0)
                                 .map(|depth| {
-                                    FreeSpace::new(
-                                        camera,
-                                        depth,
-                                        world_from_camera,
-                                        &enlarged[bi],
-                                        cfg.free_space_margin_m,
-                                        cfg.free_space_margin_per_m,
-                                        cfg.free_space_weight,
-                                    )
+                                    FreeSpace::new(camera, depth, world_from_camera, bbox, &cfg)
                                 });
                         match update_points(
                             &t.points,

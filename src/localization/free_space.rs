@@ -20,6 +20,7 @@ use nalgebra::{Isometry3, Point2, Point3};
 use scarp_slam::PinholeCamera;
 use scarp_slam::image::DepthImage;
 
+use super::LocalizationConfig;
 use crate::detection::BoundingBox;
 
 /// The quantile of the heights of a box's depth points taken as the ground at the rock's foot:
@@ -45,6 +46,7 @@ pub struct FreeSpace<'a> {
     world_from_camera: Isometry3<f64>,
     camera_from_world: Isometry3<f64>,
     floor_z_m: Option<f64>,
+    rock_floor_z_m: Option<f64>,
     margin_m: f64,
     margin_per_m: f64,
     ruled_out_weight: f64,
@@ -53,33 +55,41 @@ pub struct FreeSpace<'a> {
 impl<'a> FreeSpace<'a> {
     /// The evidence of `depth_m` (metres along the camera's z axis, 0 where nothing was
     /// measured; the same size as `camera`'s image) taken at `world_from_camera` (world ENU,
-    /// metres), for points that project near `bbox` (the enlarged box, px).
+    /// metres), for points that project near the tracked box `bbox` (px), with `config`'s
+    /// `free_space_*` tolerances and box enlargement.
     ///
-    /// A point counts as ruled out when it lies more than `margin_m + margin_per_m · d²` in front
-    /// of the depth `d` measured where it projects (`margin_per_m` in 1/m: the depth noise grows
-    /// as d² for a stereo camera), when that measured surface is ground (within
-    /// [`GROUND_BAND_M`] of the floor), or when it lies more than `margin_m` below the floor:
-    /// the 5% quantile of the heights of the depth points inside `bbox` (no floor with fewer
-    /// than 20 of them).
-    /// Ruled-out points keep `ruled_out_weight` ∈ (0, 1] of their box weight.
+    /// The floor is the 5% quantile of the heights of the depth points inside the enlarged box;
+    /// the rock's floor, that of the points inside `bbox` itself that are higher than the floor
+    /// by more than [`GROUND_BAND_M`] (each needs 20 samples). A point counts as ruled out when
+    /// it lies more than `free_space_margin_m + free_space_margin_per_m · d²` in front of the
+    /// depth `d` measured where it projects (the depth noise of a stereo camera grows as d²),
+    /// when that measured surface is ground (within [`GROUND_BAND_M`] of the floor), or when
+    /// it lies more than `free_space_margin_m` below the rock's floor (the floor without one).
+    /// Ruled-out points keep `free_space_weight` of their box weight.
     pub fn new(
         camera: &'a PinholeCamera,
         depth_m: &'a DepthImage,
         world_from_camera: &Isometry3<f64>,
         bbox: &BoundingBox,
-        margin_m: f64,
-        margin_per_m: f64,
-        ruled_out_weight: f64,
+        config: &LocalizationConfig,
     ) -> Self {
+        let (floor_z_m, rock_floor_z_m) = floors_z_m(
+            camera,
+            depth_m,
+            world_from_camera,
+            bbox,
+            &bbox.enlarged(config.box_enlargement_px),
+        );
         Self {
             camera,
             depth_m,
             world_from_camera: *world_from_camera,
             camera_from_world: world_from_camera.inverse(),
-            floor_z_m: floor_z_m(camera, depth_m, world_from_camera, bbox),
-            margin_m,
-            margin_per_m,
-            ruled_out_weight,
+            floor_z_m,
+            rock_floor_z_m,
+            margin_m: config.free_space_margin_m,
+            margin_per_m: config.free_space_margin_per_m,
+            ruled_out_weight: config.free_space_weight,
         }
     }
 
@@ -87,6 +97,12 @@ impl<'a> FreeSpace<'a> {
     /// depth.
     pub fn floor_z_m(&self) -> Option<f64> {
         self.floor_z_m
+    }
+
+    /// The height of the lowest part of the rock the box shows, world z in metres, if the box
+    /// held enough depth above the ground.
+    pub fn rock_floor_z_m(&self) -> Option<f64> {
+        self.rock_floor_z_m
     }
 
     /// The weight factor a point ruled out keeps.
@@ -100,7 +116,8 @@ impl<'a> FreeSpace<'a> {
     /// out by the floor alone.
     pub fn factor(&self, world: &Point3<f64>, pixel: &Point2<f64>) -> f64 {
         if self
-            .floor_z_m
+            .rock_floor_z_m
+            .or(self.floor_z_m)
             .is_some_and(|floor| world.z < floor - self.margin_m)
         {
             return self.ruled_out_weight;
@@ -132,39 +149,58 @@ impl<'a> FreeSpace<'a> {
     }
 }
 
-/// The 5% quantile of the world heights (m) of the depth points inside `bbox`, sampled every 4
-/// px; `None` with fewer than 20 measured samples.
-pub fn floor_z_m(
+/// The floor and the rock's floor (see [`FreeSpace::new`]), world z in metres, from the depth
+/// points inside `enlarged` and `bbox`, sampled every 4 px.
+pub fn floors_z_m(
     camera: &PinholeCamera,
     depth_m: &DepthImage,
     world_from_camera: &Isometry3<f64>,
     bbox: &BoundingBox,
-) -> Option<f64> {
+    enlarged: &BoundingBox,
+) -> (Option<f64>, Option<f64>) {
     let clamp = |v: f64, n: u32| v.round().clamp(0.0, f64::from(n.max(1)) - 1.0) as u32;
     let (u0, u1) = (
-        clamp(bbox.x_min, depth_m.width()),
-        clamp(bbox.x_max, depth_m.width()),
+        clamp(enlarged.x_min, depth_m.width()),
+        clamp(enlarged.x_max, depth_m.width()),
     );
     let (v0, v1) = (
-        clamp(bbox.y_min, depth_m.height()),
-        clamp(bbox.y_max, depth_m.height()),
+        clamp(enlarged.y_min, depth_m.height()),
+        clamp(enlarged.y_max, depth_m.height()),
     );
-    let mut heights = Vec::new();
+    // (height, whether the sample lies inside the tracked box)
+    let mut samples = Vec::new();
     for v in (v0..=v1).step_by(FLOOR_STEP_PX) {
         for u in (u0..=u1).step_by(FLOOR_STEP_PX) {
             if let Some(&d) = depth_m.get(u, v)
                 && d > 0.0
                 && d.is_finite()
             {
-                let p = camera.unproject(&Point2::new(f64::from(u), f64::from(v)), f64::from(d));
-                heights.push((world_from_camera * p).z);
+                let pixel = Point2::new(f64::from(u), f64::from(v));
+                let p = camera.unproject(&pixel, f64::from(d));
+                let inside = pixel.x >= bbox.x_min
+                    && pixel.x <= bbox.x_max
+                    && pixel.y >= bbox.y_min
+                    && pixel.y <= bbox.y_max;
+                samples.push(((world_from_camera * p).z, inside));
             }
         }
     }
-    if heights.len() < FLOOR_MIN_SAMPLES {
-        return None;
-    }
-    scarp_slam::stats::quantile_in_place(&mut heights, FLOOR_QUANTILE)
+    let quantile = |mut heights: Vec<f64>| {
+        (heights.len() >= FLOOR_MIN_SAMPLES)
+            .then(|| scarp_slam::stats::quantile_in_place(&mut heights, FLOOR_QUANTILE))
+            .flatten()
+    };
+    let floor = quantile(samples.iter().map(|s| s.0).collect());
+    let rock_floor = floor.and_then(|floor| {
+        quantile(
+            samples
+                .iter()
+                .filter(|(z, inside)| *inside && *z >= floor + GROUND_BAND_M)
+                .map(|s| s.0)
+                .collect(),
+        )
+    });
+    (floor, rock_floor)
 }
 
 #[cfg(test)]
@@ -192,17 +228,36 @@ mod tests {
         (camera, world_from_camera, depth)
     }
 
+    /// The whole image, as the tracked box with no enlargement.
+    fn whole() -> BoundingBox {
+        BoundingBox::new(0.0, 0.0, 119.0, 89.0).unwrap()
+    }
+
+    fn config(free_space_margin_per_m: f64) -> LocalizationConfig {
+        LocalizationConfig {
+            box_enlargement_px: 0.0,
+            free_space_weight: 0.05,
+            free_space_margin_m: 0.2,
+            free_space_margin_per_m,
+            ..Default::default()
+        }
+    }
+
     #[test]
     fn free_space_and_underground_points_are_ruled_out_and_the_rest_kept() {
         let (camera, pose, depth) = scene();
-        let whole = BoundingBox::new(0.0, 0.0, 119.0, 89.0).unwrap();
-        let evidence = FreeSpace::new(&camera, &depth, &pose, &whole, 0.2, 0.0, 0.05);
+        let evidence = FreeSpace::new(&camera, &depth, &pose, &whole(), &config(0.0));
         let floor = evidence.floor_z_m().unwrap();
         assert!(floor.abs() < 1e-6, "floor {floor}");
+        // The box holds the rock's top alone: no part of it is lower.
+        let rock_floor = evidence.rock_floor_z_m().unwrap();
+        assert!((rock_floor - 2.0).abs() < 1e-6, "rock floor {rock_floor}");
         let project = |p: Point3<f64>| camera.project(&(pose.inverse() * p)).unwrap();
         let at = |p: Point3<f64>| evidence.factor(&p, &project(p));
-        // Inside the rock (below its top at z = 2): kept.
-        assert_eq!(at(Point3::new(0.0, 0.0, 1.0)), 1.0);
+        // Inside the rock, within the margin below the lowest part the box shows: kept.
+        assert_eq!(at(Point3::new(0.0, 0.0, 1.9)), 1.0);
+        // Lower, where a pedestal would stand: ruled out.
+        assert_eq!(at(Point3::new(0.0, 0.0, 1.0)), 0.05);
         // Just above the rock's top, within the margin: kept.
         assert_eq!(at(Point3::new(0.0, 0.0, 2.1)), 1.0);
         // A metre above the rock: free space.
@@ -218,22 +273,21 @@ mod tests {
     #[test]
     fn holes_and_the_noise_margin_keep_points() {
         let (camera, pose, mut depth) = scene();
-        let whole = BoundingBox::new(0.0, 0.0, 119.0, 89.0).unwrap();
         let above_rock = Point3::new(0.0, 0.0, 3.0);
         let pixel = camera.project(&(pose.inverse() * above_rock)).unwrap();
         // A margin growing as d² (0.02 · 8² = 1.28 m) covers the metre above the rock.
-        let noisy = FreeSpace::new(&camera, &depth, &pose, &whole, 0.2, 0.02, 0.05);
+        let noisy = FreeSpace::new(&camera, &depth, &pose, &whole(), &config(0.02));
         assert_eq!(noisy.factor(&above_rock, &pixel), 1.0);
         // No measurement where it projects: nothing says it is free.
         *depth
             .get_mut(pixel.x.round() as u32, pixel.y.round() as u32)
             .unwrap() = 0.0;
-        let holed = FreeSpace::new(&camera, &depth, &pose, &whole, 0.2, 0.0, 0.05);
+        let holed = FreeSpace::new(&camera, &depth, &pose, &whole(), &config(0.0));
         assert_eq!(holed.factor(&above_rock, &pixel), 1.0);
         // An empty depth frame: no floor and no free space.
         let empty = DepthImage::filled(120, 90, 0.0);
-        let blind = FreeSpace::new(&camera, &empty, &pose, &whole, 0.2, 0.0, 0.05);
-        assert!(blind.floor_z_m().is_none());
+        let blind = FreeSpace::new(&camera, &empty, &pose, &whole(), &config(0.0));
+        assert!(blind.floor_z_m().is_none() && blind.rock_floor_z_m().is_none());
         assert_eq!(blind.factor(&Point3::new(0.0, 0.0, -3.0), &pixel), 1.0);
     }
 }
