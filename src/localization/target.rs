@@ -108,7 +108,7 @@ impl Target {
     }
 
     /// Replaces the points after an update and advances the status: KL of the new fit against
-    /// the previous one, the small-KL streak, then Tracking → ReadyForFineLocalization
+    /// the previous one (both widened by `converged_kl_floor_m`), the small-KL streak, then Tracking → ReadyForFineLocalization
     /// (h_p < `ready_entropy_nats`) → Converged (`converged_updates` updates in a row with KL ≤
     /// `converged_kl_nats`, while ready, once the views span `converged_min_view_span_deg`
     /// around the target: see [`Self::view_span_deg`]).
@@ -123,7 +123,10 @@ impl Target {
         config: &LocalizationConfig,
     ) -> Result<(), super::LocalizationError> {
         let gaussian = Gaussian3::from_points(&points)?;
-        let kl = gaussian.kl_divergence(&self.gaussian);
+        let floor_m2 = config.converged_kl_floor_m.powi(2);
+        let kl = gaussian
+            .with_variance_floor(floor_m2)
+            .kl_divergence(&self.gaussian.with_variance_floor(floor_m2));
         self.points = points;
         self.gaussian = gaussian;
         self.last_kl_nats = Some(kl);
