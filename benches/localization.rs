@@ -44,35 +44,27 @@ fn bench_update(c: &mut Criterion) {
         gaussian_weight: cfg.gaussian_weight,
         uniform_weight: cfg.uniform_weight,
     };
-    c.bench_function("update_2000_points", |b| {
-        b.iter(|| {
-            update_points(
-                &points,
-                &camera,
-                &second,
-                &likelihood,
-                None,
-                cfg.update_noise_sigma_m,
-                &mut rng,
-            )
-        })
-    });
     // The second view sees a wall 10 m ahead along its axis.
     let depth = DepthImage::filled(camera.width, camera.height, 10.0);
     let free_space = FreeSpace::new(&camera, &depth, &second, &bbox, &cfg);
-    c.bench_function("update_2000_points_with_depth", |b| {
-        b.iter(|| {
-            update_points(
-                &points,
-                &camera,
-                &second,
-                &likelihood,
-                Some(&free_space),
-                cfg.update_noise_sigma_m,
-                &mut rng,
-            )
-        })
-    });
+    for (name, evidence) in [
+        ("update_2000_points", None),
+        ("update_2000_points_with_depth", Some(&free_space)),
+    ] {
+        c.bench_function(name, |b| {
+            b.iter(|| {
+                update_points(
+                    &points,
+                    &camera,
+                    &second,
+                    &likelihood,
+                    evidence,
+                    cfg.update_noise_sigma_m,
+                    &mut rng,
+                )
+            })
+        });
+    }
     let cone = BoxCone::new(&camera, &bbox);
     c.bench_function("cone_test_2000_points", |b| {
         b.iter(|| cone.count_inside(&second, &points))
