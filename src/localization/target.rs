@@ -109,9 +109,10 @@ impl Target {
 
     /// Replaces the points after an update and advances the status: KL of the new fit against
     /// the previous one (both widened by `converged_kl_floor_m`), the small-KL streak, then
-    /// Tracking → ReadyForFineLocalization (h_p < `ready_entropy_nats`) → Converged (`converged_updates` updates in a row with KL ≤
-    /// `converged_kl_nats`, while ready, once the views span `converged_min_view_span_deg`
-    /// around the target: see [`Self::view_span_deg`]).
+    /// Tracking → ReadyForFineLocalization (h_p < `ready_entropy_nats`) → Converged
+    /// (`converged_updates` updates in a row with KL ≤ `converged_kl_nats`, while ready, once
+    /// the views span `converged_min_view_span_deg` around the target: see
+    /// [`Self::view_span_deg`]).
     ///
     /// # Errors
     /// [`super::LocalizationError::TooFewPoints`] when the new points cannot be fitted; the
