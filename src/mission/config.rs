@@ -44,9 +44,8 @@ pub struct MissionConfig {
     /// paired campaign (session 16) the restart did not bring the estimate-frame error down,
     /// the shorter stretch of views costing what the consistent estimate gained. Session 37
     /// found that the search's views bias the centre 0.33–0.47 m upward even with an exact
-    /// estimator, and the restart put 6 / 6 default-world centres within 0.5 m against 3 / 6
-    /// (seeds 36–37), but 2 / 4 against 3 / 4 on library-b seed 36, mapping fewer targets: a
-    /// larger pairing must decide.
+    /// estimator; over default and library-b seeds 36–37 the restart put 12 / 14 centres within
+    /// 0.5 m against 10 / 14, but mapped 8 targets against 10: a larger pairing must decide.
     pub restart_filter_for_fine_localization: bool,
     /// Target detectors: which one the perception runs (simulated by default, or an ONNX
     /// model) and their tunables.

@@ -2,7 +2,8 @@
 # Per target: the estimate-frame error of several centre estimators computed from the filter's
 # points (targets/ID/points.ply): mean (C_e today), median, and the mid-range of quantiles.
 # usage: centre_estimators.py CAMPAIGN_DIR [...]
-import glob, json, math, os, struct, sys
+import math, sys
+from localization_spread import flown_targets
 def q(xs, f):
     s = sorted(xs); k = f * (len(s) - 1); i = int(k); t = k - i
     return s[i] if i + 1 >= len(s) else s[i] * (1 - t) + s[i + 1] * t
@@ -16,19 +17,7 @@ est = {
 }
 errs = {k: [] for k in est}; vs = {k: [] for k in est}
 for d0 in sys.argv[1:]:
-  for mj in sorted(glob.glob(d0 + '/runs/*/seed-*/mission.json')):
-    d = os.path.dirname(mj)
-    m = json.load(open(mj))
-    rocks = {r['id']: r for r in json.load(open(d + '/world_gt/world.json'))['rocks']}
-    for t in m['targets']:
-        e = t.get('estimator_error_at_localization_m')
-        p = f"{d}/targets/{t['id']}/points.ply"
-        if t.get('gt_rock_id') is None or e is None or not os.path.exists(p):
-            continue
-        b = open(p, 'rb').read()
-        i = b.index(b'end_header\n') + 11
-        pts = [struct.unpack_from('<3f', b, i + 12 * k) for k in range((len(b) - i) // 12)]
-        c = rocks[t['gt_rock_id']]['centroid']
+    for d, t, c, e, pts in flown_targets(d0):
         row = []
         for k, f in est.items():
             L = [f([p[a] for p in pts]) for a in range(3)]

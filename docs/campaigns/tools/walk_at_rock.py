@@ -4,11 +4,8 @@
 # (the point the camera believes it sees at the rock's true place, less the rock), each less the
 # reference the estimate-frame metric subtracts, and their correlation with C_e's vertical error.
 # Needs numpy. usage: walk_at_rock.py CAMPAIGN_DIR [...]
-import glob, json, math, os, re, sys
+import glob, json, os, re, sys
 import numpy as np
-def load(p):
-    a = np.loadtxt(p)
-    return a
 def rot(qx, qy, qz, qw):
     return np.array([[1-2*(qy*qy+qz*qz), 2*(qx*qy-qz*qw), 2*(qx*qz+qy*qw)],
                      [2*(qx*qy+qz*qw), 1-2*(qx*qx+qz*qz), 2*(qy*qz-qx*qw)],
@@ -18,7 +15,7 @@ for d0 in sys.argv[1:]:
   for mj in sorted(glob.glob(d0 + '/runs/*/seed-*/mission.json')):
     d = os.path.dirname(mj)
     m = json.load(open(mj))
-    est, gt = load(d + '/trajectory.txt'), load(d + '/groundtruth.txt')
+    est, gt = np.loadtxt(d + '/trajectory.txt'), np.loadtxt(d + '/groundtruth.txt')
     log = open(d + '/run.log').read()
     rocks = {r['id']: r for r in json.load(open(d + '/world_gt/world.json'))['rocks']}
     for t in m['targets']:
