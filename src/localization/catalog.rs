@@ -10,7 +10,7 @@ use serde::{Deserialize, Serialize};
 use super::cone::BoxCone;
 use super::free_space::FreeSpace;
 use super::keyframe::is_keyframe;
-use super::points::generate_points;
+use super::points::{generate_points, measured_depth_range};
 use super::target::{Target, TargetStatus};
 use super::update::{BoxLikelihood, low_variance_resample, update_points};
 use super::{LocalizationConfig, LocalizationError, check_box, check_pose};
@@ -126,8 +126,9 @@ impl TargetCatalog {
     /// [`Self::observe`] with the frame's depth image (metres along the camera's z axis, 0
     /// where nothing was measured, `camera`'s size): updates also weigh each point by whether
     /// the depth leaves it possible ([`super::free_space`], with the configured
-    /// `free_space_*` tolerances). With `None`, or `free_space_weight` = 1, this is
-    /// [`Self::observe`].
+    /// `free_space_*` tolerances), and new points are born between the depths measured over
+    /// their box when `birth_depth_from_image` is set. With `None`, or with
+    /// `free_space_weight` = 1 and `birth_depth_from_image` false, this is [`Self::observe`].
     ///
     /// # Errors
     /// As [`Self::observe`]; also a depth image whose size is not the camera's.
@@ -191,15 +192,22 @@ impl TargetCatalog {
         }
 
         let mut report = ObserveReport::default();
-        // Algorithm 2's points in box `bi`'s enlarged cone.
+        // Algorithm 2's points in box `bi`'s enlarged cone, over the configured depths or
+        // those the frame measured over the box.
         let fresh_points = |bi: usize, rng: &mut R| {
+            let (near_m, far_m) = depth_m
+                .filter(|_| cfg.birth_depth_from_image)
+                .and_then(|depth| {
+                    measured_depth_range(camera, depth, &boxes[bi].1, cfg.min_depth_m)
+                })
+                .unwrap_or((cfg.min_depth_m, cfg.max_depth_m));
             generate_points(
                 camera,
                 world_from_camera,
                 &enlarged[bi],
                 cfg.points_per_target,
-                cfg.min_depth_m,
-                cfg.max_depth_m,
+                near_m,
+                far_m,
                 rng,
             )
         };
@@ -450,6 +458,66 @@ mod tests {
             .unwrap_err();
         assert!(err.to_string().contains("80×60"), "{err}");
         assert!(catalog.targets().is_empty());
+    }
+
+    /// A rock on the ground first boxed 17 m away from 12 m up, as the search first sees
+    /// one. Born over the fixed 3–18 m, the points lie along the whole cone, their centre
+    /// metres in front of the rock; born between the depths measured over the box, they lie
+    /// about it. Either way, the approach and the fine-localization circle (until the filter
+    /// converges, as the mission flies it) put the centre on the rock: with true poses, the
+    /// search's first views leave no bias in this scene.
+    #[test]
+    fn points_born_at_the_measured_depth_start_at_the_rock() {
+        let cam = PinholeCamera::from_hfov(160, 120, 80.0).unwrap();
+        let (rock, radius) = (Point3::new(3.0, -2.0, 0.7), 0.7);
+        let n = 60;
+        // The centre's error at registration and at convergence, m.
+        let run = |birth_depth_from_image: bool, seed: u64| {
+            let config = LocalizationConfig {
+                birth_depth_from_image,
+                ..Default::default()
+            };
+            let mut catalog = TargetCatalog::new(config).unwrap();
+            let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
+            let approach = (0..10).map(|k| {
+                let eye = rock + Vector3::new(-12.5 + 0.9 * k as f64, 0.0, 11.3);
+                look_at(&eye, &rock, &Vector3::z()).unwrap()
+            });
+            let circle = (0..n).map(|k| circle_pose(&rock, (k + n / 2) % n, n));
+            let mut at_birth = None;
+            for pose in approach.chain(circle) {
+                let depth = sphere_on_ground(&cam, &pose, &rock, radius);
+                let bbox = sphere_box(&cam, &pose, &rock, radius);
+                catalog
+                    .observe_with_depth(&cam, &pose, &[(7, bbox)], Some(&depth), &mut rng)
+                    .unwrap();
+                let t = &catalog.targets()[0];
+                at_birth.get_or_insert((t.center() - rock).norm());
+                if t.status() == TargetStatus::Converged {
+                    break;
+                }
+            }
+            assert_eq!(catalog.targets().len(), 1);
+            let t = &catalog.targets()[0];
+            assert_eq!(t.status(), TargetStatus::Converged);
+            (at_birth.unwrap(), (t.center() - rock).norm())
+        };
+        for seed in 0..4 {
+            let (fixed_birth, fixed_end) = run(false, seed);
+            let (measured_birth, measured_end) = run(true, seed);
+            assert!(
+                fixed_birth > 4.0,
+                "seed {seed}: born {fixed_birth} m off over 3–18 m"
+            );
+            assert!(
+                measured_birth < 1.0,
+                "seed {seed}: born {measured_birth} m off"
+            );
+            assert!(
+                fixed_end < 0.15 && measured_end < 0.15,
+                "seed {seed}: converged {fixed_end} m off (fixed range), {measured_end} m (measured)"
+            );
+        }
     }
 
     /// A state estimate whose error walks: the filter converges on a circle flown with one

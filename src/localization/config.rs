@@ -19,6 +19,13 @@ pub struct LocalizationConfig {
     /// Farthest depth of generated points along the camera z axis (the paper's d_m), m.
     /// Default 18.
     pub max_depth_m: f64,
+    /// Draw a new target's points (and a restarted one's) between the depths the frame
+    /// measured over its box, padded by the rock's size
+    /// ([`super::points::measured_depth_range`]), instead of over
+    /// `min_depth_m`–`max_depth_m` (ours, not the paper's). Only where the caller passes the
+    /// frame's depth ([`super::TargetCatalog::observe_with_depth`]) and it holds enough
+    /// samples. Default false, the paper's Algorithm 2.
+    pub birth_depth_from_image: bool,
     /// Standard deviation of the isotropic noise added to every point before weighting
     /// (Algorithm 3), m. Default 0.1.
     pub update_noise_sigma_m: f64,
@@ -98,6 +105,7 @@ impl Default for LocalizationConfig {
             box_enlargement_px: 30.0,
             min_depth_m: 3.0,
             max_depth_m: 18.0,
+            birth_depth_from_image: false,
             update_noise_sigma_m: 0.1,
             gaussian_weight: 0.2,
             uniform_weight: 0.8,
