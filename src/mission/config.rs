@@ -45,7 +45,11 @@ pub struct MissionConfig {
     /// the shorter stretch of views costing what the consistent estimate gained. Session 37
     /// found that the search's views bias the centre 0.33–0.47 m upward even with an exact
     /// estimator; over default and library-b seeds 36–37 the restart put 12 / 14 centres within
-    /// 0.5 m against 10 / 14, but mapped 8 targets against 10: a larger pairing must decide.
+    /// 0.5 m against 10 / 14, but mapped 8 targets against 10. Session 38's pairing on fresh
+    /// seeds (default and library-a 38–39) reversed it: 8 / 14 within 0.5 m against 12 / 14,
+    /// 7 mapped against 11, |α error| ≤ 2° on 46% against 79%. Over the 28 targets, 20
+    /// against 22: it stays off. The search's bias is removed at its source instead
+    /// (`[localization] birth_depth_from_image`).
     pub restart_filter_for_fine_localization: bool,
     /// Target detectors: which one the perception runs (simulated by default, or an ONNX
     /// model) and their tunables.
