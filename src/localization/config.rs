@@ -29,9 +29,9 @@ pub struct LocalizationConfig {
     /// Why: the search hands the filter a rock's box once it is within 18 m, so over 3–18 m
     /// nearly every point is born between the camera and the rock. With an exact state
     /// estimate that left the default world's centres 0.35–0.39 m high (seed 36); born at the
-    /// measured depth they were 0.05–0.13 m off. Under the GPS walk it gained nothing (16 / 22
-    /// within 0.5 m against 14 / 22 over three worlds, seeds 38–39; session 38), because the
-    /// walk within the localization window dominates there.
+    /// measured depth they were 0.05–0.13 m off. Under the GPS walk it gained nothing (14 / 22
+    /// within 0.5 m against the paper's 16 / 22 over three worlds, seeds 38–39; session 38):
+    /// the walk within the localization window dominates there.
     pub birth_depth_from_image: bool,
     /// Standard deviation of the isotropic noise added to every point before weighting
     /// (Algorithm 3), m. Default 0.1.
