@@ -381,6 +381,28 @@ mod tests {
         look_at(&eye, centre, &Vector3::z()).unwrap()
     }
 
+    /// A small camera and a sphere of radius 0.7 m resting on the ground plane z = 0.
+    fn sphere_scene() -> (PinholeCamera, Point3<f64>, f64) {
+        let cam = PinholeCamera::from_hfov(160, 120, 80.0).unwrap();
+        (cam, Point3::new(3.0, -2.0, 0.7), 0.7)
+    }
+
+    /// Observes the sphere of [`sphere_scene`] from `pose`: its box and the rendered depth.
+    fn observe_sphere(
+        catalog: &mut TargetCatalog,
+        cam: &PinholeCamera,
+        pose: &Isometry3<f64>,
+        rock: &Point3<f64>,
+        radius_m: f64,
+        rng: &mut Xoshiro256PlusPlus,
+    ) {
+        let depth = sphere_on_ground(cam, pose, rock, radius_m);
+        let bbox = sphere_box(cam, pose, rock, radius_m);
+        catalog
+            .observe_with_depth(cam, pose, &[(7, bbox)], Some(&depth), rng)
+            .unwrap();
+    }
+
     #[test]
     fn circle_of_views_localizes_and_converges() {
         let cam = camera();
@@ -409,8 +431,7 @@ mod tests {
     /// the boxes put it.
     #[test]
     fn depth_evidence_shrinks_the_point_set_to_the_rock() {
-        let cam = PinholeCamera::from_hfov(160, 120, 80.0).unwrap();
-        let (rock, radius) = (Point3::new(3.0, -2.0, 0.7), 0.7);
+        let (cam, rock, radius) = sphere_scene();
         let n = 60;
         // The centre's error and the set's 1σ along the mean line of sight (+x), m.
         let run = |free_space_weight: f64, views: usize| {
@@ -424,11 +445,7 @@ mod tests {
             let mut rng = Xoshiro256PlusPlus::seed_from_u64(5);
             for k in 0..views {
                 let pose = circle_pose(&rock, (k + n - views / 2) % n, n);
-                let depth = sphere_on_ground(&cam, &pose, &rock, radius);
-                let bbox = sphere_box(&cam, &pose, &rock, radius);
-                catalog
-                    .observe_with_depth(&cam, &pose, &[(7, bbox)], Some(&depth), &mut rng)
-                    .unwrap();
+                observe_sphere(&mut catalog, &cam, &pose, &rock, radius, &mut rng);
             }
             let t = &catalog.targets()[0];
             ((t.center() - rock).norm(), t.covariance()[(0, 0)].sqrt())
@@ -468,8 +485,7 @@ mod tests {
     /// search's first views leave no bias in this scene.
     #[test]
     fn points_born_at_the_measured_depth_start_at_the_rock() {
-        let cam = PinholeCamera::from_hfov(160, 120, 80.0).unwrap();
-        let (rock, radius) = (Point3::new(3.0, -2.0, 0.7), 0.7);
+        let (cam, rock, radius) = sphere_scene();
         let n = 60;
         // The centre's error at registration and at convergence, m.
         let run = |birth_depth_from_image: bool, seed: u64| {
@@ -486,11 +502,7 @@ mod tests {
             let circle = (0..n).map(|k| circle_pose(&rock, (k + n / 2) % n, n));
             let mut at_birth = None;
             for pose in approach.chain(circle) {
-                let depth = sphere_on_ground(&cam, &pose, &rock, radius);
-                let bbox = sphere_box(&cam, &pose, &rock, radius);
-                catalog
-                    .observe_with_depth(&cam, &pose, &[(7, bbox)], Some(&depth), &mut rng)
-                    .unwrap();
+                observe_sphere(&mut catalog, &cam, &pose, &rock, radius, &mut rng);
                 let t = &catalog.targets()[0];
                 at_birth.get_or_insert((t.center() - rock).norm());
                 if t.status() == TargetStatus::Converged {
