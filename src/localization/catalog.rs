@@ -7,10 +7,11 @@ use scarp_slam::PinholeCamera;
 use scarp_slam::image::DepthImage;
 use serde::{Deserialize, Serialize};
 
+use super::box_depth::measured_depth_range;
 use super::cone::BoxCone;
 use super::free_space::FreeSpace;
 use super::keyframe::is_keyframe;
-use super::points::{generate_points, measured_depth_range};
+use super::points::generate_points;
 use super::target::{Target, TargetStatus};
 use super::update::{BoxLikelihood, low_variance_resample, update_points};
 use super::{LocalizationConfig, LocalizationError, check_box, check_pose};

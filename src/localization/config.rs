@@ -21,7 +21,7 @@ pub struct LocalizationConfig {
     pub max_depth_m: f64,
     /// Draw a new target's points (and a restarted one's) between the depths the frame
     /// measured over its box, padded by the rock's size
-    /// ([`super::points::measured_depth_range`]), instead of over
+    /// ([`super::box_depth::measured_depth_range`]), instead of over
     /// `min_depth_m`–`max_depth_m` (ours, not the paper's). Only where the caller passes the
     /// frame's depth ([`super::TargetCatalog::observe_with_depth`]) and it holds enough
     /// samples. Default false, the paper's Algorithm 2.

@@ -36,6 +36,7 @@
 //! assert!((target.center().z - 10.5).abs() < 0.5);
 //! ```
 
+pub mod box_depth;
 pub mod catalog;
 pub mod cone;
 pub mod config;

@@ -48,8 +48,8 @@ pub struct MissionConfig {
     /// 0.5 m against 10 / 14, but mapped 8 targets against 10. Session 38's pairing on fresh
     /// seeds (default and library-a 38–39) reversed it: 8 / 14 within 0.5 m against 12 / 14,
     /// 7 mapped against 11, |α error| ≤ 2° on 46% against 79%. Over the 28 targets, 20
-    /// against 22: it stays off. The search's bias is removed at its source instead
-    /// (`[localization] birth_depth_from_image`).
+    /// against 22: it stays off. The search's bias has its own option, which removes it where
+    /// the points are born: `[localization] birth_depth_from_image` (also off by default).
     pub restart_filter_for_fine_localization: bool,
     /// Target detectors: which one the perception runs (simulated by default, or an ONNX
     /// model) and their tunables.

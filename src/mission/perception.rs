@@ -23,6 +23,7 @@ use crate::detection::simulated::{
     RoleMap, SimulatedDetector, SimulatedDetectorConfig, roles_from_world,
 };
 use crate::detection::{BoundingBox, Detection, Detector};
+use crate::localization::box_depth::depth_samples_in_box;
 use crate::localization::catalog::{ObserveReport, TargetCatalog};
 use crate::localization::config::LocalizationConfig;
 use crate::localization::target::TargetStatus as FilterStatus;
@@ -59,28 +60,8 @@ pub fn median_depth_in_box(
     depth_m: &scarp_slam::image::DepthImage,
     bbox: &BoundingBox,
 ) -> Option<f64> {
-    let (cx, cy) = bbox.center();
-    let (hw, hh) = (0.25 * bbox.width(), 0.25 * bbox.height());
-    let mut samples = Vec::with_capacity(81);
-    for j in 0..9 {
-        for i in 0..9 {
-            let u = cx - hw + 2.0 * hw * f64::from(i) / 8.0;
-            let v = cy - hh + 2.0 * hh * f64::from(j) / 8.0;
-            if u < 0.0 || v < 0.0 {
-                continue;
-            }
-            if let Some(&d) = depth_m.get(u.round() as u32, v.round() as u32)
-                && d > 0.0
-            {
-                samples.push(f64::from(d));
-            }
-        }
-    }
-    if samples.is_empty() {
-        return None;
-    }
-    samples.sort_by(f64::total_cmp);
-    Some(samples[samples.len() / 2])
+    let mut samples = depth_samples_in_box(depth_m, bbox, 0.5, 9);
+    scarp_slam::stats::quantile_in_place(&mut samples, 0.5)
 }
 
 /// Height above the lowest points in a box (the ground at the rock's foot) from which depth
