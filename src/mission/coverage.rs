@@ -49,6 +49,18 @@ pub struct CoverageConfig {
     /// all round) and meets longer odometry losses near the bases (two maps under F@2cm
     /// 0.85, against one).
     pub min_sweep_deg: f64,
+    /// Once the threshold is reached, mapping still flies on along its rings while a region of
+    /// more than this many unseen side cells, joined by their edges (round the seam too),
+    /// remains; it ends when the region shrinks to this size or the rings are flown. The
+    /// target's status still comes from the threshold alone, so a region no ring can reach
+    /// costs flight time, not the target. Default 0: off.
+    ///
+    /// Why: the threshold says how many cells are unseen, not whether they lie together. On
+    /// library-b's mirrored double rock (seeds 38–39) mapping ended at 0.91, a quarter of the
+    /// way into the second ring; the rock's upper side to the south, 1.0–1.3 m above its
+    /// contact, was never in view (92% of its surface there in no frame, facing and within
+    /// 5 m), a third of the closed rock was patched, and α_min came out 3.0–3.3° high.
+    pub max_unseen_region_cells: usize,
 }
 
 impl Default for CoverageConfig {
@@ -61,6 +73,7 @@ impl Default for CoverageConfig {
             max_incidence_deg: 75.0,
             max_depth_m: 6.0,
             min_sweep_deg: 0.0,
+            max_unseen_region_cells: 0,
         }
     }
 }
@@ -192,6 +205,48 @@ impl CylinderCoverage {
             && self.sweep_deg() >= self.config.min_sweep_deg
     }
 
+    /// The most unseen side cells that lie together: the largest set joined by shared edges,
+    /// azimuth neighbours wrapping round the seam.
+    pub fn largest_unseen_region_cells(&self) -> usize {
+        let nh = self.config.height_cells.max(1);
+        let na = self.side_cells / nh;
+        let mut visited = self.seen[..self.side_cells].to_vec();
+        let mut largest = 0;
+        for start in 0..self.side_cells {
+            if visited[start] {
+                continue;
+            }
+            visited[start] = true;
+            let (mut size, mut stack) = (0, vec![start]);
+            while let Some(cell) = stack.pop() {
+                size += 1;
+                let (a, h) = (cell / nh, cell % nh);
+                let mut neighbours = vec![((a + 1) % na) * nh + h, ((a + na - 1) % na) * nh + h];
+                if h > 0 {
+                    neighbours.push(cell - 1);
+                }
+                if h + 1 < nh {
+                    neighbours.push(cell + 1);
+                }
+                for next in neighbours {
+                    if !visited[next] {
+                        visited[next] = true;
+                        stack.push(next);
+                    }
+                }
+            }
+            largest = largest.max(size);
+        }
+        largest
+    }
+
+    /// Whether mapping may stop flying: the coverage is complete ([`Self::is_complete`]) and
+    /// no unseen region is larger than [`CoverageConfig::max_unseen_region_cells`] (when set).
+    pub fn ends_mapping(&self) -> bool {
+        let limit = self.config.max_unseen_region_cells;
+        self.is_complete() && (limit == 0 || self.largest_unseen_region_cells() <= limit)
+    }
+
     /// What keeps the coverage from complete, in words (`None` once [`Self::is_complete`]).
     pub fn shortfall(&self) -> Option<String> {
         if self.is_complete() {
@@ -319,6 +374,47 @@ mod tests {
             cells_only.observe(&camera, &view(100.0 + 2.0 * f64::from(step)));
         }
         assert!(cells_only.is_complete());
+    }
+
+    #[test]
+    fn unseen_cells_that_lie_together_keep_mapping_flying() {
+        let config = CoverageConfig {
+            max_unseen_region_cells: 4,
+            ..CoverageConfig::default()
+        };
+        let mut coverage = CylinderCoverage::new(&cylinder(), config);
+        let nh = config.height_cells;
+        coverage.seen.fill(true);
+        // Two columns either side of the seam (azimuth cells 23 and 0), three bands tall, and
+        // one cell on the far side alone: 7 of 152 unseen, above the 0.9 threshold.
+        for a in [config.azimuth_cells - 1, 0] {
+            for h in 3..6 {
+                coverage.seen[a * nh + h] = false;
+            }
+        }
+        coverage.seen[12 * nh + 1] = false;
+        assert!(coverage.is_complete());
+        assert_eq!(coverage.largest_unseen_region_cells(), 6);
+        assert!(!coverage.ends_mapping(), "six cells together are a hole");
+        // Seen from a view that closes one column's top, the region is five cells; the other
+        // column's three and the lone cell are within a limit of five.
+        coverage.seen[5] = true;
+        assert_eq!(coverage.largest_unseen_region_cells(), 5);
+        let five = CoverageConfig {
+            max_unseen_region_cells: 5,
+            ..config
+        };
+        let mut at_five = CylinderCoverage::new(&cylinder(), five);
+        at_five.seen.clone_from(&coverage.seen);
+        assert!(at_five.ends_mapping());
+        // Off, the threshold alone decides.
+        let mut off = CylinderCoverage::new(&cylinder(), CoverageConfig::default());
+        off.seen.clone_from(&coverage.seen);
+        off.seen[5] = false;
+        assert!(off.ends_mapping());
+        // Nothing unseen: no region.
+        off.seen.fill(true);
+        assert_eq!(off.largest_unseen_region_cells(), 0);
     }
 
     #[test]

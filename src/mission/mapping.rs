@@ -675,6 +675,7 @@ pub fn finish_target(
     report.coverage = session.coverage.fraction();
     report.base_coverage = session.coverage.bottom_fraction();
     report.sweep_deg = session.coverage.sweep_deg();
+    report.largest_unseen_region_cells = session.coverage.largest_unseen_region_cells();
     report.keyframes = session.stored.len();
     let shortfall = session.coverage.shortfall();
     let stored = session.stored;

@@ -73,6 +73,11 @@ pub struct TargetReport {
     /// unwrapped azimuth ([`super::coverage::CylinderCoverage::sweep_deg`]).
     #[serde(default)]
     pub sweep_deg: f64,
+    /// The most unseen side cells of the cylinder that lie together when mapping ended
+    /// ([`super::coverage::CylinderCoverage::largest_unseen_region_cells`]): a large one is a
+    /// part of the rock no view reached, where the closed scan is guessed.
+    #[serde(default)]
+    pub largest_unseen_region_cells: usize,
     /// Mesh size.
     pub triangles: usize,
     /// Rock height from the mesh, metres.

@@ -465,7 +465,7 @@ impl<'a> Mission<'a> {
                             session.process(frame, &estimate, Some(&truth))?;
                             odometry_error = session.navigation_error_m();
                         }
-                        (session.coverage().is_complete(), odometry_error)
+                        (session.coverage().ends_mapping(), odometry_error)
                     }
                     None => (true, None),
                 };
