@@ -12,7 +12,7 @@
 //! With `PROFILE=LABEL` in the environment (a row's label: `world seed-N rock-id shape`), that
 //! target's per-sector profiles, its true and scanned contact polygons and the support outline
 //! the scan read are printed too. With `PATCHES` set, every unseen patch of every scan is
-//! printed (`PATCH label area-m² centroid-xyz mean-normal-xyz area-vector-m²`).
+//! printed (`PATCH label area-m² centroid-xyz area-vector-direction-xyz area-vector-m²`).
 //!
 //! With `OUT_DIR`, each run's `mission.json` is written there with its targets' α_min, interval
 //! and true α_min re-analysed (and `world_gt/world.json` beside it), so that
@@ -108,16 +108,16 @@ fn print_readings(
     let unseen_m2: f64 = closed.unseen_patches().map(|p| p.area_m2).sum();
     if std::env::var("PATCHES").is_ok() {
         for q in closed.unseen_patches() {
-            let n = q.area_vector_m2 / q.area_vector_m2.norm().max(1e-12);
+            let direction = q.area_vector_m2 / q.area_vector_m2.norm().max(1e-12);
             println!(
                 "PATCH {label} {:.4} {:.3} {:.3} {:.3} {:.2} {:.2} {:.2} {:.3}",
                 q.area_m2,
                 q.centroid.x,
                 q.centroid.y,
                 q.centroid.z,
-                n.x,
-                n.y,
-                n.z,
+                direction.x,
+                direction.y,
+                direction.z,
                 q.area_vector_m2.norm()
             );
         }

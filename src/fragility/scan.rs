@@ -1373,8 +1373,9 @@ impl ClosedScan {
     /// How far α_min on `polygon` may move with the rock's unseen shape, degrees (below,
     /// above): for each unseen patch, the centre of mass of `analysis` (the closed scan's) moved
     /// by a paraboloid cap over the patch's opening (its area vector) bulging out by
-    /// `bulge_ratio` times the radius of the patch's area, and by the same cap sunk in; the patches' moves combine in quadrature, as
-    /// independent holes. (0, 0) without unseen patches.
+    /// `bulge_ratio` times the radius of the patch's area, and by the same cap sunk in; the
+    /// patches' moves combine in quadrature, as independent holes. (0, 0) without unseen
+    /// patches.
     pub fn unseen_shape_alpha_spread_deg(
         &self,
         analysis: &FragilityAnalysis,

@@ -58,7 +58,7 @@ pub struct CoverageConfig {
     /// Why: the threshold says how many cells are unseen, not whether they lie together. On
     /// library-b's mirrored double rock (seeds 38–39) mapping ended at 0.91, a quarter of the
     /// way into the second ring; the rock's upper side to the south, 1.0–1.3 m above its
-    /// contact, was never in view (92% of its surface there in no frame, facing and within
+    /// contact, was never in view (92–99% of its surface there in no frame, facing and within
     /// 5 m), a third of the closed rock was patched, and α_min came out 3.0–3.3° high.
     /// At 4, over 30 targets paired with the rule off (library-b seeds 38–39, three worlds
     /// seeds 40–41; session 39's campaign document) 24 were mapped against 20, 22 read within
@@ -225,14 +225,13 @@ impl CylinderCoverage {
             while let Some(cell) = stack.pop() {
                 size += 1;
                 let (a, h) = (cell / nh, cell % nh);
-                let mut neighbours = vec![((a + 1) % na) * nh + h, ((a + na - 1) % na) * nh + h];
-                if h > 0 {
-                    neighbours.push(cell - 1);
-                }
-                if h + 1 < nh {
-                    neighbours.push(cell + 1);
-                }
-                for next in neighbours {
+                let neighbours = [
+                    Some(((a + 1) % na) * nh + h),
+                    Some(((a + na - 1) % na) * nh + h),
+                    (h > 0).then(|| cell - 1),
+                    (h + 1 < nh).then_some(cell + 1),
+                ];
+                for next in neighbours.into_iter().flatten() {
                     if !visited[next] {
                         visited[next] = true;
                         stack.push(next);
