@@ -31,27 +31,37 @@ fn outcome(plan: &Result<scarp_planning::prelude::RingPlan, impl std::fmt::Displ
             Repair::DroppedRing { reason, .. } => Some(reason.clone()),
             _ => None,
         }) {
-            None => plan
-                .repairs
-                .iter()
-                .find_map(|r| match r {
-                    Repair::Rerouted {
-                        start_turned_deg,
-                        vertical_approach,
-                        stepped_transitions,
-                    } => Some(format!(
-                        "flown, rerouted:{}{}{}",
-                        if *start_turned_deg != 0.0 {
-                            " turned"
-                        } else {
-                            ""
-                        },
-                        if *vertical_approach { " vertical" } else { "" },
-                        if *stepped_transitions { " stepped" } else { "" },
-                    )),
-                    _ => None,
-                })
-                .unwrap_or_else(|| "flown".into()),
+            None => {
+                plan.repairs
+                    .iter()
+                    .find_map(|r| match r {
+                        Repair::Rerouted {
+                            start_turned_deg,
+                            vertical_approach,
+                            stepped_transitions,
+                        } => Some(format!(
+                            "flown, rerouted:{}{}{}",
+                            if *start_turned_deg != 0.0 {
+                                " turned"
+                            } else {
+                                ""
+                            },
+                            if *vertical_approach { " vertical" } else { "" },
+                            if *stepped_transitions { " stepped" } else { "" },
+                        )),
+                        _ => None,
+                    })
+                    .unwrap_or_else(|| "flown".into())
+                    + if plan
+                        .repairs
+                        .iter()
+                        .any(|r| matches!(r, Repair::TrimmedRing { .. }))
+                    {
+                        ", trimmed to an arc"
+                    } else {
+                        ""
+                    }
+            }
             Some(reason) if reason.contains("over the slope") => "dropped: terrain lift".into(),
             Some(reason) if reason.contains("transition") => {
                 "dropped: approach or transition".into()

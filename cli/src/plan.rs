@@ -180,17 +180,18 @@ pub fn run(args: PlanArgs) -> anyhow::Result<()> {
         .with_context(|| format!("creating {}", args.out.display()))?;
     write_csv(
         &args.out.join("rings.csv"),
-        "ring,center_x_m,center_y_m,z_m,radius_m,counter_clockwise,band_bottom_m,band_top_m",
+        "ring,center_x_m,center_y_m,z_m,radius_m,counter_clockwise,band_bottom_m,band_top_m,span_deg",
         rings.rings.iter().enumerate().map(|(i, r)| {
             format!(
-                "{i},{},{},{},{},{},{},{}",
+                "{i},{},{},{},{},{},{},{},{}",
                 r.center_x_m,
                 r.center_y_m,
                 r.z_m,
                 r.radius_m,
                 r.counter_clockwise,
                 r.band_bottom_m,
-                r.band_top_m
+                r.band_top_m,
+                r.span_rad.to_degrees()
             )
         }),
     )?;

@@ -554,6 +554,17 @@ pub enum Repair {
         /// Largest lift of a waypoint (m).
         max_lift_m: f64,
     },
+    /// Following the terrain would lift the base ring beyond its limit on one side (a rock at
+    /// the foot of a slope), so only the longest arc within the limit is flown, ending where
+    /// the next ring begins.
+    TrimmedRing {
+        /// Ring index.
+        ring: usize,
+        /// How far round the axis the arc reaches (degrees).
+        span_deg: f64,
+        /// The largest lift the full ring would have needed (m).
+        full_ring_lift_m: f64,
+    },
     /// The base ring could not be cleared (itself, or the path to and from it) and is not
     /// flown.
     DroppedRing {

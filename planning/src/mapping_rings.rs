@@ -88,8 +88,9 @@ pub struct BaseRingConfig {
     /// refused. Default 1.
     pub max_raise_m: f64,
     /// The ring follows the terrain (each waypoint lifted to keep the clearance over the
-    /// ground beside it); a ring that following the terrain lifts by more than this (m)
-    /// anywhere is dropped ([`PlanError::TerrainLift`]), and the paper's rings map the rock
+    /// ground beside it); where that lifts it by more than this (m), only the longest arc
+    /// within the limit is flown ([`Repair::TrimmedRing`], see `min_arc_deg`), and with no such
+    /// arc the ring is dropped ([`PlanError::TerrainLift`]) and the paper's rings map the rock
     /// alone. Default 1.5.
     ///
     /// Why: on holdout-c seed 48 a rock on a hillside got a base ring widened 1.5 m and lifted
@@ -98,6 +99,15 @@ pub struct BaseRingConfig {
     /// odometry re-acquired the map from that guess 1.3 m off (F@2cm 0.08). Lifted 1.5 m, a
     /// ring widened to its limit (3.5 m off a 0.75 m cylinder) still has the neck within 4.8 m.
     pub max_terrain_lift_m: f64,
+    /// Where following the terrain would lift the full ring beyond `max_terrain_lift_m` (a rock
+    /// at the foot of a slope or a scarp), the longest arc of the ring within that limit is
+    /// flown instead, if it reaches at least this far round the axis (degrees); a shorter arc
+    /// drops the ring. Default 120: an arc sees the base from the side, which the paper's rings,
+    /// looking down, barely do, and a third of a turn still sees it across about two thirds of
+    /// its directions (each view reaches some 60° round the rock either side); 360 flies full
+    /// rings only. At the foot of library-b's scarp and holdout-c's hillside the arcs reach
+    /// 144–192°.
+    pub min_arc_deg: f64,
 }
 
 impl Default for BaseRingConfig {
@@ -109,6 +119,7 @@ impl Default for BaseRingConfig {
             max_widen_m: 2.0,
             max_raise_m: 1.0,
             max_terrain_lift_m: 1.5,
+            min_arc_deg: 120.0,
         }
     }
 }
@@ -137,6 +148,12 @@ impl BaseRingConfig {
             self.max_terrain_lift_m,
             0.0,
             1e3,
+        )?;
+        check_range(
+            "mapping.base_ring.min_arc_deg",
+            self.min_arc_deg,
+            0.0,
+            360.0,
         )?;
         Ok(())
     }
@@ -257,6 +274,16 @@ pub struct Ring {
     /// by the base ring's last repair ([`Repair::BentRing`]).
     #[serde(default)]
     pub max_bend_m: f64,
+    /// How far round the axis the ring is flown (radians): a full turn, or less for a base ring
+    /// trimmed to the arc its terrain lift allows ([`Repair::TrimmedRing`]). The ring ends at
+    /// the plan's start azimuth ([`RingPlan::start_azimuth_rad`]), where the next ring begins,
+    /// so a trimmed ring begins `span_rad` before it, against its direction of flight.
+    #[serde(default = "full_turn_rad")]
+    pub span_rad: f64,
+}
+
+fn full_turn_rad() -> f64 {
+    std::f64::consts::TAU
 }
 
 impl Ring {
@@ -267,6 +294,27 @@ impl Ring {
         self.band_bottom_m = self.z_m - s * (g + half_scan_rad).tan();
         self.band_top_m = self.z_m - s * (g - half_scan_rad).tan();
         self
+    }
+
+    /// Azimuth (from east, counter-clockwise, rad) where the ring begins when it ends at
+    /// `end_azimuth_rad`: the same for a full ring, [`Ring::span_rad`] back against its
+    /// direction of flight for a trimmed one.
+    pub fn begin_azimuth_rad(&self, end_azimuth_rad: f64) -> f64 {
+        if self.is_full_turn() {
+            end_azimuth_rad
+        } else {
+            end_azimuth_rad - self.direction_sign() * self.span_rad
+        }
+    }
+
+    /// Whether the ring is flown all the way round.
+    pub fn is_full_turn(&self) -> bool {
+        self.span_rad >= std::f64::consts::TAU - 1e-9
+    }
+
+    /// +1 counter-clockwise (seen from above), −1 clockwise.
+    fn direction_sign(&self) -> f64 {
+        if self.counter_clockwise { 1.0 } else { -1.0 }
     }
 
     /// Point of the ring at azimuth `azimuth_rad` (from east, counter-clockwise).
@@ -290,7 +338,8 @@ pub struct RingPlan {
     pub path: Path,
     /// For each ring, the range of `path.waypoints` that lies on it.
     pub ring_waypoints: Vec<Range<usize>>,
-    /// Azimuth (from the axis, rad) where every ring starts and ends.
+    /// Azimuth (from the axis, rad) where every ring starts and ends; a trimmed base ring
+    /// ([`Ring::span_rad`]) only ends there.
     pub start_azimuth_rad: f64,
     /// Repairs made for clearance.
     pub repairs: Vec<Repair>,
@@ -480,6 +529,7 @@ fn plan_mapping_rings_from(
                 camera_pitch_down_deg: pitch_deg,
                 follows_terrain: base.is_some() && k == 0,
                 max_bend_m: 0.0,
+                span_rad: full_turn_rad(),
             }
             .with_band(cylinder, half_scan)
         })
@@ -556,14 +606,18 @@ fn assemble(
     let mut wps = vec![*start];
     if route.vertical_approach
         && let Some(first) = rings.first()
-        && let Some(via) = vertical_approach_via(start, &first.point_at(start_azimuth))
+        && let Some(via) = vertical_approach_via(
+            start,
+            &first.point_at(first.begin_azimuth_rad(start_azimuth)),
+        )
     {
         wps.push(via);
     }
     let mut yaw = wps[wps.len() - 1].yaw_rad;
     let mut ranges = Vec::with_capacity(rings.len());
     for (k, ring) in rings.iter().enumerate() {
-        let first = ring.point_at(start_azimuth);
+        let begin_azimuth = ring.begin_azimuth_rad(start_azimuth);
+        let first = ring.point_at(begin_azimuth);
         let toward_axis = yaw_toward(&first, &cylinder.axis_point(first.z));
         if k == 0 {
             yaw = unwrap_near(toward_axis, yaw);
@@ -579,11 +633,14 @@ fn assemble(
                 wps.push(Waypoint::new(via, last.yaw_rad));
             }
         }
-        let sign = if ring.counter_clockwise { 1.0 } else { -1.0 };
+        let sign = ring.direction_sign();
+        // A trimmed ring keeps the full ring's spacing, so its waypoints are the full ring's
+        // corners (see `trim_to_arc`).
+        let segments = ((n as f64 * ring.span_rad / std::f64::consts::TAU).round() as usize).max(1);
         let begin = wps.len();
-        for j in 0..=n {
-            let da = sign * std::f64::consts::TAU * j as f64 / n as f64;
-            let p = ring.point_at(start_azimuth + da);
+        for j in 0..=segments {
+            let da = sign * ring.span_rad * j as f64 / segments as f64;
+            let p = ring.point_at(begin_azimuth + da);
             let w = Waypoint::new(p, yaw + da);
             // Skip a duplicate of the previous waypoint (e.g. the start already on the ring).
             if let Some(last) = wps.last()
@@ -594,7 +651,7 @@ fn assemble(
             }
             wps.push(w);
         }
-        yaw += sign * std::f64::consts::TAU;
+        yaw += sign * ring.span_rad;
         ranges.push(begin..wps.len());
     }
     RingPlan {
@@ -738,6 +795,36 @@ fn flown_corners(
             return (corners, push);
         }
     }
+}
+
+/// The longest run of consecutive corners (counter-clockwise, round the seam) whose lift
+/// `lifts_m[j]` stays within `limit_m`: its first corner and how many segments it spans. `None`
+/// when fewer than two corners are within the limit.
+fn longest_arc_within(lifts_m: &[f64], limit_m: f64) -> Option<(usize, usize)> {
+    let n = lifts_m.len();
+    let within = |j: usize| lifts_m[j % n] <= limit_m;
+    if (0..n).all(within) {
+        return Some((0, n));
+    }
+    // Runs are counted from a corner beyond the limit, so none is split by the seam.
+    let outside = (0..n).find(|&j| !within(j))?;
+    let mut best: Option<(usize, usize)> = None;
+    let mut run_start = None;
+    for step in 1..=n {
+        let j = outside + step;
+        match (within(j), run_start) {
+            (true, None) => run_start = Some(j),
+            (false, Some(s)) => {
+                let corners = j - s;
+                if corners >= 2 && best.is_none_or(|(_, b)| corners - 1 > b) {
+                    best = Some((s % n, corners - 1));
+                }
+                run_start = None;
+            }
+            _ => {}
+        }
+    }
+    best
 }
 
 /// How every ring is flown: where its waypoints start, how many there are, and the half scan
@@ -886,9 +973,13 @@ fn polygon_clearance(
 /// [`PlanError::TargetBelowTerrain`] if the cylinder's centre is underground, and with
 /// [`PlanError::Clearance`] if no repair within `ccfg.max_raise_m` works.
 ///
+/// Where following the terrain would lift the base ring beyond
+/// [`BaseRingConfig::max_terrain_lift_m`], only its longest arc within the limit is flown, if
+/// that reaches [`BaseRingConfig::min_arc_deg`] ([`Repair::TrimmedRing`]); the rings then start
+/// where the arc ends.
+///
 /// When the base ring makes the plan fail (no widening, raise or bend within its limits clears
-/// it, following the terrain would lift it beyond [`BaseRingConfig::max_terrain_lift_m`], or
-/// no route to or from it is clear), the plan is made again without it, and
+/// it, no arc of it stays within the terrain-lift limit, or no route to or from it is clear), the plan is made again without it, and
 /// [`Repair::DroppedRing`] says so: the paper's rings alone still map the rock.
 pub fn plan_mapping_rings_clear(
     cylinder: &VerticalCylinder,
@@ -996,19 +1087,47 @@ fn plan_rings_clear_once(
         rings.push(cand);
         repairs.push(rep);
     }
-    for (k, ring) in rings.iter().enumerate().filter(|(_, r)| r.follows_terrain) {
-        let lift_m = flown_corners(ring, &flown, env, ccfg)
+    let mut start_azimuth_rad = plan.start_azimuth_rad;
+    for (k, ring) in rings
+        .iter_mut()
+        .enumerate()
+        .filter(|(_, r)| r.follows_terrain)
+    {
+        let lifts_m: Vec<f64> = flown_corners(ring, &flown, env, ccfg)
             .0
             .iter()
             .map(|c| c.z - ring.z_m)
-            .fold(0.0, f64::max);
-        if lift_m > cfg.base_ring.max_terrain_lift_m {
-            return Err(PlanError::TerrainLift {
-                ring: k,
-                lift_m,
-                limit_m: cfg.base_ring.max_terrain_lift_m,
-            });
+            .collect();
+        let limit_m = cfg.base_ring.max_terrain_lift_m;
+        let lift_m = lifts_m.iter().copied().fold(0.0, f64::max);
+        if lift_m <= limit_m {
+            continue;
         }
+        let too_high = PlanError::TerrainLift {
+            ring: k,
+            lift_m,
+            limit_m,
+        };
+        let Some((first, segments)) = longest_arc_within(&lifts_m, limit_m) else {
+            return Err(too_high);
+        };
+        let span_rad = std::f64::consts::TAU * segments as f64 / flown.waypoints as f64;
+        if span_rad.to_degrees() < cfg.base_ring.min_arc_deg {
+            return Err(too_high);
+        }
+        ring.span_rad = span_rad;
+        // Every ring ends where the next begins: the arc's last corner in its direction.
+        let end_corner = if ring.counter_clockwise {
+            first + segments
+        } else {
+            first
+        };
+        start_azimuth_rad = flown.corner_azimuth_rad(end_corner % flown.waypoints);
+        repairs.push(Repair::TrimmedRing {
+            ring: k,
+            span_deg: span_rad.to_degrees(),
+            full_ring_lift_m: lift_m,
+        });
     }
     // The first route whose whole path keeps the clearance.
     let mut first_report = None;
@@ -1017,7 +1136,7 @@ fn plan_rings_clear_once(
             cylinder,
             start,
             rings.clone(),
-            plan.start_azimuth_rad,
+            start_azimuth_rad,
             cfg.waypoints_per_ring,
             repairs.clone(),
             route,
@@ -1088,6 +1207,21 @@ mod tests {
             assert_eq!((via.x, via.y), (last.x, last.y), "straight up first");
             assert_eq!(via.z, first.z, "then level across");
         }
+    }
+
+    #[test]
+    fn the_longest_arc_within_the_lift_limit_may_cross_the_seam() {
+        // Corners 5, 6, 0 and 1 (round the seam: three segments) are within 1.0; 2..=4 are not.
+        let lifts = [0.2, 0.9, 1.4, 2.0, 1.1, 0.0, 0.5];
+        assert_eq!(longest_arc_within(&lifts, 1.0), Some((5, 3)));
+        // Two runs: the longer one wins, whichever comes first.
+        let lifts = [0.0, 2.0, 0.0, 0.0, 0.0, 2.0];
+        assert_eq!(longest_arc_within(&lifts, 1.0), Some((2, 2)));
+        // A lone corner is no arc.
+        assert_eq!(longest_arc_within(&[2.0, 0.0, 2.0, 2.0], 1.0), None);
+        assert_eq!(longest_arc_within(&[2.0, 3.0], 1.0), None);
+        // All within: the whole ring.
+        assert_eq!(longest_arc_within(&[0.0; 5], 1.0), Some((0, 5)));
     }
 
     #[test]

@@ -577,14 +577,85 @@ fn base_ring_on_a_scarp_follows_the_terrain() {
 }
 
 #[test]
-fn base_ring_over_a_high_scarp_is_dropped_not_flown_out_of_view() {
-    // A 3 m step beside the rock: following it, the base ring would climb about 2.8 m on the
-    // upper side, out of a level view of the base and, for a wide rock, out of the depth range.
+fn base_ring_at_the_foot_of_a_high_scarp_flies_the_arc_below_it() {
+    // A 3 m step beside the rock: following it all the way round, the base ring would climb
+    // about 2.8 m on the upper side, out of a level view of the base and, for a wide rock, out
+    // of the depth range. The arc on the low side stays within the 1.5 m lift limit.
     let (env, cyl, start) = rock_beside_a_scarp(3.0);
     let mut cfg = PlanningConfig::default();
     let plan = common::plan_rings(&cyl, &start, &env, &cfg).unwrap();
-    assert!(!plan.flies_base_ring(), "{:?}", plan.repairs);
-    match &plan.repairs[0] {
+    assert!(plan.flies_base_ring(), "{:?}", plan.repairs);
+    let (span_deg, full_ring_lift_m) = plan
+        .repairs
+        .iter()
+        .find_map(|r| match r {
+            Repair::TrimmedRing {
+                ring: 0,
+                span_deg,
+                full_ring_lift_m,
+            } => Some((*span_deg, *full_ring_lift_m)),
+            _ => None,
+        })
+        .unwrap_or_else(|| panic!("no trimmed ring in {:?}", plan.repairs));
+    assert!(full_ring_lift_m > 2.5, "full ring lift {full_ring_lift_m}");
+    // Corners within the limit lie where the ground 1.5 m east of them is below 0.5 m.
+    assert!((150.0..270.0).contains(&span_deg), "arc {span_deg}°");
+    let base = &plan.path.waypoints[plan.ring_waypoints[0].clone()];
+    let azimuth = |p: &Point3<f64>| (p.y - cyl.center_y_m).atan2(p.x - cyl.center_x_m);
+    for w in base {
+        assert!(
+            w.position_m.z <= 1.8 + 1.5 + 1e-9,
+            "lifted past the limit: {w:?}"
+        );
+        // On the low side, facing the axis.
+        assert!(w.position_m.x < 0.6, "{w:?}");
+        let toward_axis = azimuth(&w.position_m) + std::f64::consts::PI;
+        let turn = (w.yaw_rad - toward_axis).rem_euclid(std::f64::consts::TAU);
+        assert!(
+            turn.min(std::f64::consts::TAU - turn) < 1e-6,
+            "yaw off: {w:?}"
+        );
+    }
+    // It sweeps its span, through the west, and ends where the next ring begins.
+    let swept_deg = base
+        .windows(2)
+        .map(|w| {
+            let d = (azimuth(&w[1].position_m) - azimuth(&w[0].position_m))
+                .rem_euclid(std::f64::consts::TAU);
+            if plan.rings[0].counter_clockwise {
+                d
+            } else {
+                std::f64::consts::TAU - d
+            }
+        })
+        .sum::<f64>()
+        .to_degrees();
+    assert!(
+        (swept_deg - span_deg).abs() < 1e-6,
+        "{swept_deg} against {span_deg}"
+    );
+    assert!(base.iter().any(|w| w.position_m.x < -cyl.radius_m - 1.0));
+    let end = base.last().unwrap().position_m;
+    let next = plan.path.waypoints[plan.ring_waypoints[1].clone()][0].position_m;
+    let turn = (azimuth(&end) - azimuth(&next)).rem_euclid(std::f64::consts::TAU);
+    assert!(turn.min(std::f64::consts::TAU - turn) < 1e-6);
+    assert!(plan.clearance.unwrap().is_clear());
+    let (_, report, _) = plan_clear_trajectory(
+        &plan.path,
+        &StartState::default(),
+        &cfg.min_snap,
+        &env,
+        &cfg.clearance,
+    )
+    .unwrap();
+    assert!(report.is_clear());
+
+    // Asked for full rings only, the ring is dropped, and says why.
+    let mut full_only = cfg;
+    full_only.mapping.base_ring.min_arc_deg = 360.0;
+    let dropped = common::plan_rings(&cyl, &start, &env, &full_only).unwrap();
+    assert!(!dropped.flies_base_ring(), "{:?}", dropped.repairs);
+    match &dropped.repairs[0] {
         Repair::DroppedRing { ring: 0, reason } => {
             assert!(
                 reason.contains("climb") && reason.contains("limit 1.50 m"),
@@ -593,11 +664,12 @@ fn base_ring_over_a_high_scarp_is_dropped_not_flown_out_of_view() {
         }
         other => panic!("unexpected {other:?}"),
     }
-    assert!(plan.clearance.unwrap().is_clear());
-    // A limit above the climb keeps the ring, lifted by as much.
+    assert!(dropped.clearance.unwrap().is_clear());
+    // A limit above the climb keeps the full ring, lifted by as much.
     cfg.mapping.base_ring.max_terrain_lift_m = 3.5;
     let lifted = common::plan_rings(&cyl, &start, &env, &cfg).unwrap();
     assert!(lifted.flies_base_ring(), "{:?}", lifted.repairs);
+    assert!(lifted.rings[0].is_full_turn());
     let lift = lifted
         .repairs
         .iter()
