@@ -13,15 +13,7 @@ fn rings_trajectory() -> (Environment, RingPlan, Trajectory) {
     let cylinder = VerticalCylinder::bounding(&points).unwrap();
     let start = Waypoint::new(Point3::new(8.0, 3.0, 5.0), 0.0);
     let rings = common::plan_rings(&cylinder, &start, &env, &cfg).unwrap();
-    let (traj, report, _) = plan_clear_trajectory(
-        &rings.path,
-        &StartState::default(),
-        &cfg.min_snap,
-        &env,
-        &cfg.clearance,
-    )
-    .unwrap();
-    assert!(report.is_clear());
+    let traj = common::clear_trajectory_from_rest(&rings.path, &env, &cfg);
     (env, rings, traj)
 }
 

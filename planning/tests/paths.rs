@@ -564,15 +564,7 @@ fn base_ring_on_a_scarp_follows_the_terrain() {
             .any(|r| matches!(r, Repair::FollowedTerrain { ring: 0, .. }))
     );
     assert!(plan.clearance.unwrap().is_clear());
-    let (traj, report, _) = plan_clear_trajectory(
-        &plan.path,
-        &StartState::default(),
-        &cfg.min_snap,
-        &env,
-        &cfg.clearance,
-    )
-    .unwrap();
-    assert!(report.is_clear());
+    let traj = common::clear_trajectory_from_rest(&plan.path, &env, &cfg);
     assert!(traj.duration_s() < 600.0, "{} s", traj.duration_s());
 }
 
@@ -640,15 +632,7 @@ fn base_ring_at_the_foot_of_a_high_scarp_flies_the_arc_below_it() {
     let turn = (azimuth(&end) - azimuth(&next)).rem_euclid(std::f64::consts::TAU);
     assert!(turn.min(std::f64::consts::TAU - turn) < 1e-6);
     assert!(plan.clearance.unwrap().is_clear());
-    let (_, report, _) = plan_clear_trajectory(
-        &plan.path,
-        &StartState::default(),
-        &cfg.min_snap,
-        &env,
-        &cfg.clearance,
-    )
-    .unwrap();
-    assert!(report.is_clear());
+    let _ = common::clear_trajectory_from_rest(&plan.path, &env, &cfg);
 
     // Asked for full rings only, the ring is dropped, and says why.
     let mut full_only = cfg;

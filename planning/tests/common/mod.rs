@@ -66,3 +66,22 @@ pub fn plan_rings(
 ) -> Result<RingPlan, PlanError> {
     cfg.rings_around(cylinder, start, env)
 }
+
+/// The min-snap trajectory along `path` from rest, kept clear of `env` with `cfg`'s settings;
+/// panics if it cannot be planned, and asserts it is clear.
+pub fn clear_trajectory_from_rest(
+    path: &Path,
+    env: &Environment,
+    cfg: &PlanningConfig,
+) -> Trajectory {
+    let (traj, report, _) = plan_clear_trajectory(
+        path,
+        &StartState::default(),
+        &cfg.min_snap,
+        env,
+        &cfg.clearance,
+    )
+    .unwrap();
+    assert!(report.is_clear(), "{report:?}");
+    traj
+}
