@@ -635,7 +635,7 @@ fn assemble(
         }
         let sign = ring.direction_sign();
         // A trimmed ring keeps the full ring's spacing, so its waypoints are the full ring's
-        // corners (see `trim_to_arc`).
+        // corners (`longest_arc_within`).
         let segments = ((n as f64 * ring.span_rad / std::f64::consts::TAU).round() as usize).max(1);
         let begin = wps.len();
         for j in 0..=segments {
