@@ -32,7 +32,8 @@ fn outcome(plan: &Result<scarp_planning::prelude::RingPlan, impl std::fmt::Displ
             _ => None,
         }) {
             None => {
-                plan.repairs
+                let route = plan
+                    .repairs
                     .iter()
                     .find_map(|r| match r {
                         Repair::Rerouted {
@@ -51,16 +52,16 @@ fn outcome(plan: &Result<scarp_planning::prelude::RingPlan, impl std::fmt::Displ
                         )),
                         _ => None,
                     })
-                    .unwrap_or_else(|| "flown".into())
-                    + if plan
-                        .repairs
-                        .iter()
-                        .any(|r| matches!(r, Repair::TrimmedRing { .. }))
-                    {
-                        ", trimmed to an arc"
-                    } else {
-                        ""
-                    }
+                    .unwrap_or_else(|| "flown".into());
+                let trimmed = plan
+                    .repairs
+                    .iter()
+                    .any(|r| matches!(r, Repair::TrimmedRing { .. }));
+                if trimmed {
+                    route + ", trimmed to an arc"
+                } else {
+                    route
+                }
             }
             Some(reason) if reason.contains("over the slope") => "dropped: terrain lift".into(),
             Some(reason) if reason.contains("transition") => {

@@ -66,7 +66,8 @@ pub struct CoverageConfig {
     /// went the other way (default seed 40's rock 2 read +2.6° against 0.0°, inside its
     /// interval; library-a seed 41's stone E22 was refused). Session 40 made it the default: the
     /// six targets of default seeds 42–43 flown with it all read within 0.8°, and the main job
-    /// (default seed 0) keeps its figures (session 40's campaign document).
+    /// (default seed 0) maps the same two of its three targets, each within 0.7° (session 40's
+    /// campaign document).
     pub max_unseen_region_cells: usize,
 }
 
