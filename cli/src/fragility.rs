@@ -185,6 +185,7 @@ pub fn run(args: FragilityArgs) -> anyhow::Result<()> {
             contact_m = closed.contact_height_m(),
             support_plane_m = closed.support_plane.map(|p| p.height_m),
             support_roughness_m = closed.support_plane.map(|p| p.roughness_m),
+            partial_support_m = closed.partial_support.map(|p| p.height_m),
             loops = closed.filled_patches.len(),
             "scan cut above its support and closed"
         );

@@ -378,7 +378,8 @@ pub struct AlphaInterval {
     pub sources: Vec<IntervalSource>,
     /// 1σ of a scanned contact's height, metres: the `support_plane` source moves the plane by
     /// ±1.96 of it ([`scan::ClosedScan::contact_height_sigma_m`]: the support's measured
-    /// roughness and the mesh's error). `None` for `perturbation`.
+    /// roughness and the mesh's error, or, without a support plane, the reach from the neck to
+    /// the support seen on part of the turn). `None` for `perturbation`.
     #[serde(default)]
     pub contact_height_sigma_m: Option<f64>,
 }
