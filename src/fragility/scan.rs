@@ -1238,20 +1238,22 @@ struct CutRock {
 fn cut_rock(mesh: &TriangleMesh, config: &ScanConfig) -> Result<CutRock, FragilityError> {
     config.validate()?;
     let (neck_z, axis_xy) = find_neck(mesh, config)?;
-    let plane = support_plane(mesh, &axis_xy, neck_z, config, config.support_min_sectors);
-    let partial_support = plane
-        .is_none()
-        .then(|| {
-            support_plane(
-                mesh,
-                &axis_xy,
-                neck_z,
-                config,
-                config.partial_support_min_sectors,
-            )
-        })
-        .flatten();
-    let support_plane = plane;
+    let full = support_plane(mesh, &axis_xy, neck_z, config, config.support_min_sectors);
+    let half = support_plane(
+        mesh,
+        &axis_xy,
+        neck_z,
+        config,
+        config.partial_support_min_sectors,
+    );
+    // A support seen around half the turn well above the first level seen all round is what
+    // the rock stands on; the level below it is the ground (library-a seed 39's double rock:
+    // its ledge one sector short of a plane, the ground 25 cm down read as the plane).
+    let (support_plane, partial_support) = match (full, half) {
+        (Some(f), Some(h)) if h.height_m > f.height_m + SUPPORT_ROUGHNESS_BAND_M => (None, Some(h)),
+        (Some(f), _) => (Some(f), None),
+        (None, h) => (None, h),
+    };
     let plane_z = support_plane.map(|p| p.height_m);
     let contact_height_m = plane_z.unwrap_or(neck_z);
     let cut_z = plane_z.map_or(neck_z, |z| z + config.cut_above_support_m);
@@ -1981,10 +1983,17 @@ mod tests {
     /// plane all round, but one on half the turn.
     fn open_scan_with_half_ledge(ledge_z: f64) -> TriangleMesh {
         let mut scan = open_scan();
-        let steps = 16;
+        add_flat_ring(&mut scan, ledge_z, std::f64::consts::PI);
+        scan
+    }
+
+    /// Adds an upward-facing flat ring at `z` (radii 0.14 to 0.5 m about the z axis) over the
+    /// azimuths 0 to `span_rad`.
+    fn add_flat_ring(scan: &mut TriangleMesh, z: f64, span_rad: f64) {
+        let steps = 32;
         let at = |r: f64, i: usize| {
-            let a = std::f64::consts::PI * i as f64 / steps as f64;
-            Point3::new((r * a.cos()) as f32, (r * a.sin()) as f32, ledge_z as f32)
+            let a = span_rad * i as f64 / steps as f64;
+            Point3::new((r * a.cos()) as f32, (r * a.sin()) as f32, z as f32)
         };
         for i in 0..steps {
             let base = scan.positions.len() as u32;
@@ -1994,7 +2003,33 @@ mod tests {
             scan.faces
                 .extend([[base, base + 1, base + 2], [base, base + 2, base + 3]]);
         }
-        scan
+    }
+
+    /// A full ring of ground 20 cm below a half-turn ledge is not the rock's support: the
+    /// ledge is, read as a half-turn support (library-a seed 39's double rock had its ledge one
+    /// sector short of a plane and was cut at the ground below: 20.06° against 4.48°).
+    #[test]
+    fn a_half_turn_ledge_above_a_full_ground_is_the_support() {
+        let config = FragilityConfig::default();
+        let bare = close_scan(&open_scan(), &config.scan).unwrap();
+        let ledge_z = bare.neck_height_m - 0.04;
+        let ground_z = bare.neck_height_m - 0.2;
+        let mut scan = open_scan_with_half_ledge(ledge_z);
+        add_flat_ring(&mut scan, ground_z, std::f64::consts::TAU);
+        let closed = close_scan(&scan, &config.scan).unwrap();
+        assert!(closed.support_plane.is_none(), "{:?}", closed.support_plane);
+        let partial = closed.partial_support.expect("the ledge is the support");
+        assert!((partial.height_m - ledge_z).abs() < 1e-4, "{partial:?}");
+        // Without the ledge, the ground is the plane.
+        let mut ground_only = open_scan();
+        add_flat_ring(&mut ground_only, ground_z, std::f64::consts::TAU);
+        let plane = close_scan(&ground_only, &config.scan)
+            .unwrap()
+            .support_plane;
+        assert!(
+            plane.is_some_and(|p| (p.height_m - ground_z).abs() < 1e-4),
+            "{plane:?}"
+        );
     }
 
     /// A support seen around half the turn, a few centimetres below the neck, is read as the
