@@ -33,8 +33,11 @@ fn main() -> Result<()> {
         .context("usage: frame_probe MESH.ply [FRAGILITY_TOML]")?;
     let mesh = read_mesh(Path::new(path))?;
     let config: FragilityConfig = match args.get(1) {
-        Some(toml_path) => toml::from_str(&std::fs::read_to_string(toml_path)?)
-            .with_context(|| format!("reading {toml_path}"))?,
+        Some(toml_path) => {
+            let text = std::fs::read_to_string(toml_path)
+                .with_context(|| format!("reading {toml_path}"))?;
+            toml::from_str(&text).with_context(|| format!("parsing {toml_path}"))?
+        }
         None => FragilityConfig::default(),
     };
     let (lo, hi) = mesh.bounds().context("the mesh is empty")?;

@@ -122,15 +122,16 @@ pub struct ScanConfig {
     /// Of 12 sectors around the rock's axis, how many an upward-facing ring must fill to be the
     /// support's top. Default 7: the rock's overhang hides the top on some sides.
     pub support_min_sectors: usize,
-    /// Where no level fills [`ScanConfig::support_min_sectors`], the highest one that fills
-    /// this many sectors is the support's top seen on part of the turn
-    /// ([`ClosedScan::partial_support`]): the contact is read at the neck, and its height's
-    /// doubt reaches down (and up) to that level. Default 6, half the turn: a rock on another
+    /// Where no level fills [`ScanConfig::support_min_sectors`], or the first that does lies
+    /// more than [`SUPPORT_ROUGHNESS_BAND_M`] below the highest one that fills this many sectors
+    /// (it is then the ground under the support), that highest level is the support's top seen
+    /// on part of the turn ([`ClosedScan::partial_support`]): the contact is read at the neck,
+    /// and its height's doubt reaches down (and up) to that level. Default 6, half the turn: a rock on another
     /// rock (the double rock) sits where the lower rock's top falls away on one side. In the
     /// mission meshes of sessions 37–39 (206 targets), the plane-less scans that no other rule
     /// refused were 8 double rocks, each with a half-turn level 1.2–4.3 cm below its neck; read
     /// at the neck they were −0.2° to +2.5° off, 7 of 8 inside the interval (the miss, +2.5°,
-    /// comes from the landing, not the height). Every other plane-less scan was refused for
+    /// does not come from the height). Every other plane-less scan was refused for
     /// its base. At most [`ScanConfig::support_min_sectors`]; equal to it, a scan without a
     /// plane is refused.
     pub partial_support_min_sectors: usize,
@@ -291,7 +292,7 @@ pub struct ClosedScan {
     /// The support's top, when it was found as a plane ([`ClosedScan::contact_height_m`] is
     /// then its height, else the neck's).
     pub support_plane: Option<SupportPlane>,
-    /// Where no [`ClosedScan::support_plane`] was found: the support's top seen around part of
+    /// Where no [`ClosedScan::support_plane`] was taken: the support's top seen around part of
     /// the turn ([`ScanConfig::partial_support_min_sectors`]). The contact is still read at the
     /// neck; the distance between the two sets its height's doubt
     /// ([`ClosedScan::contact_height_sigma_m`]).
@@ -433,22 +434,38 @@ impl SupportPlane {
     }
 }
 
-/// The support's top (pedestal or ground) under a scanned rock: the highest level from
-/// `support_search_above_m` above `neck_z` to `support_search_below_m` below it where
-/// upward-facing faces fill at least `min_sectors` of [`SECTORS`] sectors around `axis_xy`;
-/// its height is the area-weighted mean height of the faces within a bin of it, and its
-/// roughness their spread within [`SUPPORT_ROUGHNESS_BAND_M`]. `None` when no level qualifies
-/// (the support is not seen around that much of the turn).
-fn support_plane(
+/// The support's top under a scanned rock, as `(plane, partial)`: the plane is the support
+/// level ([`support_level`]) seen in [`ScanConfig::support_min_sectors`], the partial one that
+/// seen in [`ScanConfig::partial_support_min_sectors`], kept only where no plane stands within
+/// [`SUPPORT_ROUGHNESS_BAND_M`] of it. A partial level farther above the plane than that is
+/// what the rock stands on, and the plane below it the ground: library-a seed 39's double rock
+/// had its ledge one sector short of a plane, the ground 25 cm down was read as the plane, and
+/// α_min read 20.06° against 4.48°.
+fn support_top(
     mesh: &TriangleMesh,
     axis_xy: &Point2<f64>,
     neck_z: f64,
     config: &ScanConfig,
-    min_sectors: usize,
-) -> Option<SupportPlane> {
-    // (height, area, sector) of each upward face near the neck.
-    let faces: Vec<(f64, f64, usize)> = mesh
-        .faces
+) -> (Option<SupportPlane>, Option<SupportPlane>) {
+    let faces = upward_faces_near_neck(mesh, axis_xy, neck_z, config);
+    let full = support_level(&faces, neck_z, config, config.support_min_sectors);
+    let half = support_level(&faces, neck_z, config, config.partial_support_min_sectors);
+    match (full, half) {
+        (Some(f), Some(h)) if h.height_m > f.height_m + SUPPORT_ROUGHNESS_BAND_M => (None, Some(h)),
+        (Some(f), _) => (Some(f), None),
+        (None, h) => (None, h),
+    }
+}
+
+/// `(height, area, sector)` of each upward-facing face of `mesh` within the support search's
+/// band about `neck_z` and `support_radius_m` of `axis_xy` (metres, m², of [`SECTORS`]).
+fn upward_faces_near_neck(
+    mesh: &TriangleMesh,
+    axis_xy: &Point2<f64>,
+    neck_z: f64,
+    config: &ScanConfig,
+) -> Vec<(f64, f64, usize)> {
+    mesh.faces
         .iter()
         .filter_map(|f| {
             let [a, b, c] = f.map(|v| mesh.positions[v as usize].cast::<f64>());
@@ -463,7 +480,21 @@ fn support_plane(
                 && (xy - axis_xy).norm() <= config.support_radius_m)
                 .then(|| (centre.z, 0.5 * area2, sector_of(&xy, axis_xy, SECTORS)))
         })
-        .collect();
+        .collect()
+}
+
+/// A support level among `faces` ([`upward_faces_near_neck`]): the highest level from
+/// `support_search_above_m` above `neck_z` to `support_search_below_m` below it where the faces
+/// fill at least `min_sectors` of [`SECTORS`] sectors; its height is the area-weighted mean
+/// height of the faces within a bin of it, and its roughness their spread within
+/// [`SUPPORT_ROUGHNESS_BAND_M`]. `None` when no level qualifies (the support is not seen around
+/// that much of the turn).
+fn support_level(
+    faces: &[(f64, f64, usize)],
+    neck_z: f64,
+    config: &ScanConfig,
+    min_sectors: usize,
+) -> Option<SupportPlane> {
     let bins = ((config.support_search_above_m + config.support_search_below_m) / SUPPORT_BIN_M)
         .ceil() as usize;
     let level = (0..bins).find_map(|i| {
@@ -1238,22 +1269,7 @@ struct CutRock {
 fn cut_rock(mesh: &TriangleMesh, config: &ScanConfig) -> Result<CutRock, FragilityError> {
     config.validate()?;
     let (neck_z, axis_xy) = find_neck(mesh, config)?;
-    let full = support_plane(mesh, &axis_xy, neck_z, config, config.support_min_sectors);
-    let half = support_plane(
-        mesh,
-        &axis_xy,
-        neck_z,
-        config,
-        config.partial_support_min_sectors,
-    );
-    // A support seen around half the turn well above the first level seen all round is what
-    // the rock stands on; the level below it is the ground (library-a seed 39's double rock:
-    // its ledge one sector short of a plane, the ground 25 cm down read as the plane).
-    let (support_plane, partial_support) = match (full, half) {
-        (Some(f), Some(h)) if h.height_m > f.height_m + SUPPORT_ROUGHNESS_BAND_M => (None, Some(h)),
-        (Some(f), _) => (Some(f), None),
-        (None, h) => (None, h),
-    };
+    let (support_plane, partial_support) = support_top(mesh, &axis_xy, neck_z, config);
     let plane_z = support_plane.map(|p| p.height_m);
     let contact_height_m = plane_z.unwrap_or(neck_z);
     let cut_z = plane_z.map_or(neck_z, |z| z + config.cut_above_support_m);
@@ -1907,38 +1923,19 @@ mod tests {
     fn the_support_roughness_is_the_spread_of_its_top() {
         let config = ScanConfig::default();
         let axis = Point2::origin();
-        let flat = support_plane(
-            &cells(|_, _| 0.0),
-            &axis,
-            1.05,
-            &config,
-            config.support_min_sectors,
-        )
-        .unwrap();
+        let flat = support_top(&cells(|_, _| 0.0), &axis, 1.05, &config)
+            .0
+            .unwrap();
         assert!((flat.height_m - 1.0).abs() < 1e-6, "{flat:?}");
         assert!(flat.roughness_m < 1e-6, "{flat:?}");
         let step = |i: i32, j: i32| if (i + j) % 2 == 0 { 0.006 } else { -0.006 };
-        let rough = support_plane(
-            &cells(step),
-            &axis,
-            1.05,
-            &config,
-            config.support_min_sectors,
-        )
-        .unwrap();
+        let rough = support_top(&cells(step), &axis, 1.05, &config).0.unwrap();
         assert!((rough.height_m - 1.006).abs() < 1e-5, "{rough:?}");
         assert!((rough.roughness_m - 0.006).abs() < 2e-4, "{rough:?}");
         assert!((rough.height_sigma_m(0.002) - 0.00632).abs() < 2e-4);
         // Cells 4 cm off the plane are the ground or the rock, not the support's roughness.
         let far = |i: i32, j: i32| if (i + j) % 2 == 0 { 0.0 } else { -0.04 };
-        let far = support_plane(
-            &cells(far),
-            &axis,
-            1.05,
-            &config,
-            config.support_min_sectors,
-        )
-        .unwrap();
+        let far = support_top(&cells(far), &axis, 1.05, &config).0.unwrap();
         assert!(far.roughness_m < 1e-6, "{far:?}");
     }
 
