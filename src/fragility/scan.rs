@@ -340,8 +340,13 @@ pub struct FilledPatch {
 /// Upward-facing faces count toward the support plane when their normal is within this cosine
 /// of +z (18°).
 const UP_COS: f64 = 0.95;
-/// Height bins of the support-plane search, metres.
+/// Height window of the support-plane search, metres: a level's faces lie within half of it.
 const SUPPORT_BIN_M: f64 = 0.005;
+/// Step of the support-plane search's window down the heights, metres. Finer than the window,
+/// so that a level is found wherever its faces fit the window, not only where they fall inside
+/// one of a fixed grid of bins: with fixed 5 mm bins, a tilt of a quarter degree moved default
+/// seed 48's and library-a seed 39's ledges across a bin edge and flipped which support was read.
+const SUPPORT_SEARCH_STEP_M: f64 = 0.001;
 /// The band below the support plane whose surface outlines the support's top, metres: from
 /// 1.5 cm (below the wedge the TSDF fills) to 15 cm under the plane. The rock's overhang often
 /// hides the support's first centimetres from every view (the squat block of library-b, seed 3,
@@ -484,9 +489,10 @@ fn upward_faces_near_neck(
 }
 
 /// A support level among `faces` ([`upward_faces_near_neck`]): the highest level from
-/// `support_search_above_m` above `neck_z` to `support_search_below_m` below it where the faces
-/// fill at least `min_sectors` of [`SECTORS`] sectors; its height is the area-weighted mean
-/// height of the faces within a bin of it, and its roughness their spread within
+/// `support_search_above_m` above `neck_z` to `support_search_below_m` below it (in steps of
+/// [`SUPPORT_SEARCH_STEP_M`]) whose faces within half a [`SUPPORT_BIN_M`] fill at least
+/// `min_sectors` of [`SECTORS`] sectors; its height is the area-weighted mean height of the
+/// faces within a bin of it, and its roughness their spread within
 /// [`SUPPORT_ROUGHNESS_BAND_M`]. `None` when no level qualifies (the support is not seen around
 /// that much of the turn).
 fn support_level(
@@ -495,10 +501,13 @@ fn support_level(
     config: &ScanConfig,
     min_sectors: usize,
 ) -> Option<SupportPlane> {
-    let bins = ((config.support_search_above_m + config.support_search_below_m) / SUPPORT_BIN_M)
+    let steps = ((config.support_search_above_m + config.support_search_below_m)
+        / SUPPORT_SEARCH_STEP_M)
         .ceil() as usize;
-    let level = (0..bins).find_map(|i| {
-        let z = neck_z + config.support_search_above_m - (i as f64 + 0.5) * SUPPORT_BIN_M;
+    let level = (0..steps).find_map(|i| {
+        let z = neck_z + config.support_search_above_m
+            - 0.5 * SUPPORT_BIN_M
+            - i as f64 * SUPPORT_SEARCH_STEP_M;
         let at_level = faces
             .iter()
             .filter(|(fz, _, _)| (fz - z).abs() <= 0.5 * SUPPORT_BIN_M)
@@ -2066,6 +2075,31 @@ mod tests {
         config.scan.partial_support_min_sectors = config.scan.support_min_sectors;
         let refused = analyze_scan(&scan, &config).unwrap_err().to_string();
         assert!(refused.contains("support's top is not seen"), "{refused}");
+    }
+
+    /// A level whose faces span 4 mm (half the turn 2 mm below it, half 2 mm above, as a
+    /// quarter degree of tilt spreads a 0.5 m ledge) is read wherever it lies: a fixed grid of
+    /// 5 mm bins split it 6 sectors to 6 across a bin edge, so that no bin filled 7 and the
+    /// search ran on down to the ground.
+    #[test]
+    fn a_level_across_any_bin_edge_is_found() {
+        let config = ScanConfig::default();
+        let neck_z = 1.0;
+        for k in 0..10 {
+            let level_z = neck_z - 0.03 - 0.0005 * f64::from(k);
+            let faces: Vec<(f64, f64, usize)> = (0..SECTORS)
+                .map(|s| {
+                    let dz = if s < SECTORS / 2 { -0.002 } else { 0.002 };
+                    (level_z + dz, 0.01, s)
+                })
+                .collect();
+            let found = support_level(&faces, neck_z, &config, config.support_min_sectors)
+                .unwrap_or_else(|| panic!("no level found at {level_z:.4} m"));
+            assert!(
+                (found.height_m - level_z).abs() < 1e-9,
+                "{found:?} against {level_z:.4} m"
+            );
+        }
     }
 
     /// An ellipsoidal rock (semi-axes 0.45 m across, 0.8 m tall) cut flat 0.1 m above its bottom
