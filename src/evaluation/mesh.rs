@@ -800,7 +800,7 @@ mod tests {
         }
         let mut faces = Vec::new();
         for i in 0..rings as u32 {
-            for j in 0..segments as u32 {
+            for j in 0..segments {
                 let (a, b) = (i * segments + j, i * segments + (j + 1) % segments);
                 let (c, d) = (a + segments, b + segments);
                 faces.push([a, b, d]);
