@@ -230,7 +230,7 @@ fn compare_with_world(
     let Some((rock, error_m)) = nearest else {
         return Ok(None);
     };
-    let distance = MeshDistance::new(&rock.mesh, &[], 16, "rock")
+    let distance = MeshDistance::new(&rock.mesh, "rock")
         .with_context(|| format!("rock {} has an empty mesh", rock.id))?;
     let on = target
         .points()

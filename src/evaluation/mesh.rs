@@ -2,18 +2,15 @@
 //! 2017, *Tanks and Temples*).
 //!
 //! Both surfaces are sampled densely and area-weighted with a seeded RNG. The distance from a
-//! sample to the other mesh is the exact point-to-triangle distance to the nearest of the
-//! candidate triangles found with a kiddo k-d tree over that mesh's own samples, vertices and
-//! centroids. All lengths are metres in the meshes' common frame (world ENU).
+//! sample to the other mesh is the exact distance to its nearest triangle ([`MeshDistance`], a
+//! bounding-volume hierarchy searched branch-and-bound). All lengths are metres in the meshes'
+//! common frame (world ENU).
 //!
 //! - accuracy: distances from reconstruction samples to the ground truth;
 //! - completeness: distances from ground-truth samples to the reconstruction;
 //! - precision: the fraction of accuracy distances ≤ τ; recall: the fraction of completeness
 //!   distances ≤ τ; F-score: their harmonic mean.
 
-use std::num::NonZero;
-
-use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use nalgebra::{Isometry3, Point3};
 use rand::rngs::Xoshiro256PlusPlus;
 use rand::{RngExt, SeedableRng};
@@ -35,7 +32,9 @@ pub struct MeshEvalConfig {
     pub samples_per_m2: f64,
     /// Cap on the samples of one mesh. Default 2 000 000.
     pub max_samples: usize,
-    /// Candidate triangles examined per distance query. Default 16.
+    /// Unused: the distance search has been exact since session 42 (it was the number of
+    /// candidate triangles a k-d tree examined per query). Kept so that configuration files and
+    /// JSON that set it still parse (`deny_unknown_fields`). Default 16.
     pub neighbours: usize,
     /// Ignore reconstruction triangles whose centroid lies farther than this from the
     /// ground-truth bounding box, metres. Default none (keep everything).
@@ -198,74 +197,184 @@ pub fn sample_surface(
         .collect()
 }
 
-/// Exact distances from points to a mesh, through a k-d tree of the mesh's samples.
-pub struct MeshDistance<'a> {
-    mesh: &'a TriangleMesh,
-    tree: ImmutableKdTree<f64, 3>,
-    faces: Vec<u32>,
-    neighbours: NonZero<usize>,
+/// Exact distances from points to a triangle mesh: a bounding-volume hierarchy (BVH) over its
+/// triangles, searched branch-and-bound.
+///
+/// The answer is the minimum over *all* triangles of the distance to
+/// [`closest_point_on_triangle`], computed in f64 from the mesh's f32 vertices, so it equals a
+/// brute-force scan. (Until session 42 a k-d tree over samples, vertices and centroids picked 16
+/// candidate triangles, which could miss the nearest one and spent most of the mission's
+/// evaluation stage in the k-d tree.) A query is a pure function of the mesh and the point:
+/// results do not depend on the thread count or query order.
+pub struct MeshDistance {
+    /// Depth-first order: an inner node's left child follows it, its right child is at `first`.
+    nodes: Vec<BvhNode>,
+    /// The triangles' vertices in f64, metres, permuted so that each leaf's are contiguous.
+    triangles: Vec<[Point3<f64>; 3]>,
 }
 
-impl<'a> MeshDistance<'a> {
-    /// Indexes `mesh` with its vertices, face centroids and `samples` (with their faces).
+/// A BVH node: the axis-aligned box of its triangles (metres) and either its leaf triangles
+/// (`count` > 0: `triangles[first..first + count]`) or, for `count` = 0, its right child's index.
+#[derive(Debug, Clone, Copy)]
+struct BvhNode {
+    lo: [f64; 3],
+    hi: [f64; 3],
+    first: u32,
+    count: u32,
+}
+
+/// Triangles per leaf at most (a common choice; not tuned).
+const BVH_LEAF_TRIANGLES: usize = 4;
+
+/// Entries of the traversal stack: it holds at most one pending sibling per level, and the
+/// median split keeps the depth at ⌈log₂(faces)⌉ + 1 ≤ 33 for any u32 face count.
+const BVH_STACK: usize = 64;
+
+impl BvhNode {
+    /// Squared distance from `p` to the node's box (0 inside), square metres: a lower bound of
+    /// the squared distance to any of its triangles.
+    #[inline]
+    fn distance_squared_m2(&self, p: &Point3<f64>) -> f64 {
+        let mut d2 = 0.0;
+        for a in 0..3 {
+            let d = (self.lo[a] - p[a]).max(p[a] - self.hi[a]).max(0.0);
+            d2 += d * d;
+        }
+        d2
+    }
+}
+
+impl MeshDistance {
+    /// Indexes the triangles of `mesh` (positions in metres, any frame; queries use the same
+    /// frame). Degenerate triangles are kept: [`closest_point_on_triangle`] handles them.
+    /// `which` names the mesh in the error.
     ///
     /// # Errors
     /// [`MeshEvalError::EmptyMesh`] when the mesh has no faces.
-    pub fn new(
-        mesh: &'a TriangleMesh,
-        samples: &[(Point3<f64>, u32)],
-        neighbours: usize,
-        which: &'static str,
-    ) -> Result<Self, MeshEvalError> {
-        let mut points: Vec<[f64; 3]> = Vec::new();
-        let mut faces = Vec::new();
-        for f in 0..mesh.face_count() {
-            let [a, b, c] = mesh.triangle(f);
-            let centroid = (a.coords + b.coords + c.coords) / 3.0;
-            points.push([centroid.x, centroid.y, centroid.z]);
-            faces.push(f as u32);
-            for p in [a, b, c] {
-                points.push([p.x, p.y, p.z]);
-                faces.push(f as u32);
-            }
+    ///
+    /// # Panics
+    /// When a face indexes a vertex out of range; [`TriangleMesh::validate`] rules that out.
+    pub fn new(mesh: &TriangleMesh, which: &'static str) -> Result<Self, MeshEvalError> {
+        if mesh.face_count() == 0 {
+            return Err(MeshEvalError::EmptyMesh { which, hint: "" });
         }
-        for (p, f) in samples {
-            points.push([p.x, p.y, p.z]);
-            faces.push(*f);
-        }
-        let empty = MeshEvalError::EmptyMesh { which, hint: "" };
-        if points.is_empty() {
-            return Err(empty);
-        }
-        let tree = ImmutableKdTree::new_from_slice(&points).map_err(|_| empty)?;
-        Ok(Self {
-            mesh,
-            tree,
-            faces,
-            neighbours: NonZero::new(neighbours.max(1)).unwrap_or(NonZero::<usize>::MIN),
-        })
+        let triangles: Vec<[Point3<f64>; 3]> =
+            (0..mesh.face_count()).map(|f| mesh.triangle(f)).collect();
+        // (centroid, face) of each triangle, reordered in place by the build.
+        let mut items: Vec<([f64; 3], u32)> = triangles
+            .iter()
+            .enumerate()
+            .map(|(f, [a, b, c])| {
+                let m = (a.coords + b.coords + c.coords) / 3.0;
+                ([m.x, m.y, m.z], f as u32)
+            })
+            .collect();
+        let mut nodes = Vec::with_capacity(2 * items.len() / BVH_LEAF_TRIANGLES + 1);
+        build_bvh(&triangles, &mut items, 0, &mut nodes);
+        let triangles = items.iter().map(|(_, f)| triangles[*f as usize]).collect();
+        Ok(Self { nodes, triangles })
     }
 
-    /// Distance from `p` to the nearest candidate triangle, metres.
+    /// Distance from `p` (metres, the mesh's frame) to the nearest point of the mesh, metres.
+    /// Infinite when `p` has a NaN coordinate.
     pub fn distance(&self, p: &Point3<f64>) -> f64 {
-        let found = self
-            .tree
-            .query(&[p.x, p.y, p.z])
-            .nearest_n::<SquaredEuclidean<f64>>(self.neighbours)
-            .execute();
+        self.distance_squared_m2(p).sqrt()
+    }
+
+    /// Squared distance from `p` to the mesh, square metres (see [`Self::distance`]).
+    pub fn distance_squared_m2(&self, p: &Point3<f64>) -> f64 {
         let mut best = f64::INFINITY;
-        let mut seen: Vec<u32> = Vec::with_capacity(found.len());
-        for r in found {
-            let f = self.faces[r.item as usize];
-            if seen.contains(&f) {
-                continue;
+        // Nearer child first, the farther one pushed with its box distance; anything whose
+        // box is no nearer than the best triangle so far cannot hold a nearer one.
+        let mut stack = [(0u32, 0.0f64); BVH_STACK];
+        let mut len = 0;
+        let mut node = 0usize;
+        let mut node_d2 = self.nodes[0].distance_squared_m2(p);
+        loop {
+            if node_d2 < best {
+                let n = &self.nodes[node];
+                if n.count > 0 {
+                    let first = n.first as usize;
+                    for [a, b, c] in &self.triangles[first..first + n.count as usize] {
+                        let d2 = (closest_point_on_triangle(p, a, b, c) - p).norm_squared();
+                        best = best.min(d2);
+                    }
+                } else {
+                    let (left, right) = (node + 1, n.first as usize);
+                    let dl = self.nodes[left].distance_squared_m2(p);
+                    let dr = self.nodes[right].distance_squared_m2(p);
+                    let (near, near_d2, far, far_d2) = if dl <= dr {
+                        (left, dl, right, dr)
+                    } else {
+                        (right, dr, left, dl)
+                    };
+                    if far_d2 < best {
+                        stack[len] = (far as u32, far_d2);
+                        len += 1;
+                    }
+                    node = near;
+                    node_d2 = near_d2;
+                    continue;
+                }
             }
-            seen.push(f);
-            let [a, b, c] = self.mesh.triangle(f as usize);
-            best = best.min((closest_point_on_triangle(p, &a, &b, &c) - p).norm());
+            let Some(top) = len.checked_sub(1) else {
+                break;
+            };
+            len = top;
+            (node, node_d2) = (stack[top].0 as usize, stack[top].1);
         }
         best
     }
+}
+
+/// Appends the subtree over `items` (centroids and faces, starting at leaf-order position
+/// `offset`) to `nodes` in depth-first order and returns its root's index. Splits at the median
+/// centroid along the longest axis of the centroids' box, so the tree is balanced (bounded
+/// depth for the fixed query stack) and the build is deterministic.
+fn build_bvh(
+    triangles: &[[Point3<f64>; 3]],
+    items: &mut [([f64; 3], u32)],
+    offset: usize,
+    nodes: &mut Vec<BvhNode>,
+) -> usize {
+    let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+    let (mut clo, mut chi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+    for (centroid, f) in items.iter() {
+        for v in &triangles[*f as usize] {
+            for a in 0..3 {
+                lo[a] = lo[a].min(v[a]);
+                hi[a] = hi[a].max(v[a]);
+            }
+        }
+        for a in 0..3 {
+            clo[a] = clo[a].min(centroid[a]);
+            chi[a] = chi[a].max(centroid[a]);
+        }
+    }
+    let index = nodes.len();
+    nodes.push(BvhNode {
+        lo,
+        hi,
+        first: offset as u32,
+        count: items.len() as u32,
+    });
+    if items.len() <= BVH_LEAF_TRIANGLES {
+        return index;
+    }
+    let axis = (0..3)
+        .max_by(|&a, &b| (chi[a] - clo[a]).total_cmp(&(chi[b] - clo[b])))
+        .unwrap_or(0);
+    let mid = items.len() / 2;
+    // Ties broken by face so that the order does not depend on the input permutation.
+    items.select_nth_unstable_by(mid, |x, y| {
+        x.0[axis].total_cmp(&y.0[axis]).then(x.1.cmp(&y.1))
+    });
+    let (left, right) = items.split_at_mut(mid);
+    build_bvh(triangles, left, offset, nodes);
+    let right_index = build_bvh(triangles, right, offset + mid, nodes);
+    nodes[index].first = right_index as u32;
+    nodes[index].count = 0;
+    index
 }
 
 /// The reconstruction's faces whose centroid lies within `margin_m` of the axis-aligned box
@@ -466,9 +575,8 @@ pub fn evaluate_mesh_at_taus(
             hint: "",
         });
     }
-    let gt_index = MeshDistance::new(ground_truth, &gt_samples, config.neighbours, "ground truth")?;
-    let recon_index =
-        MeshDistance::new(recon, &recon_samples, config.neighbours, "reconstruction")?;
+    let gt_index = MeshDistance::new(ground_truth, "ground truth")?;
+    let recon_index = MeshDistance::new(recon, "reconstruction")?;
     // Only the context's part near the ground truth can be nearest to a cropped sample.
     let context_mesh = match context {
         Some(mesh) => {
@@ -488,15 +596,7 @@ pub fn evaluate_mesh_at_taus(
     };
     // A context wholly outside the box scores nothing.
     let context_index = match &context_mesh {
-        Some(mesh) if mesh.face_count() > 0 => {
-            let samples = sample_surface(mesh, sample_count(mesh, config), &mut rng);
-            Some(MeshDistance::new(
-                mesh,
-                &samples,
-                config.neighbours,
-                "context",
-            )?)
-        }
+        Some(mesh) if mesh.face_count() > 0 => Some(MeshDistance::new(mesh, "context")?),
         _ => None,
     };
     let accuracy: Vec<f64> = recon_samples
@@ -537,6 +637,7 @@ pub fn evaluate_mesh_at_taus(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use proptest::prelude::*;
 
     fn square(z: f32, size: f32) -> TriangleMesh {
         TriangleMesh::new(
@@ -575,6 +676,190 @@ mod tests {
         assert!(with.precision > 0.999, "{with:?}");
         assert!(alone.recall > 0.999 && with.recall > 0.999);
         assert!(with.accuracy_mean_m < 1e-6 && alone.accuracy_mean_m > 0.02);
+    }
+
+    /// Minimum over every triangle: what [`MeshDistance`] must equal.
+    fn brute_force_m(mesh: &TriangleMesh, p: &Point3<f64>) -> f64 {
+        (0..mesh.face_count())
+            .map(|f| {
+                let [a, b, c] = mesh.triangle(f);
+                (closest_point_on_triangle(p, &a, &b, &c) - p).norm()
+            })
+            .fold(f64::INFINITY, f64::min)
+    }
+
+    /// The index before session 42: a k-d tree over centroids, vertices and surface samples,
+    /// then the exact distance to the faces of the 16 nearest points.
+    fn kd_tree_distances_m(
+        mesh: &TriangleMesh,
+        samples: &[(Point3<f64>, u32)],
+        queries: &[Point3<f64>],
+    ) -> Vec<f64> {
+        use kiddo::{ImmutableKdTree, SquaredEuclidean};
+        let (mut points, mut faces) = (Vec::new(), Vec::new());
+        for f in 0..mesh.face_count() {
+            let [a, b, c] = mesh.triangle(f);
+            let centroid = (a.coords + b.coords + c.coords) / 3.0;
+            for p in [centroid, a.coords, b.coords, c.coords] {
+                points.push([p.x, p.y, p.z]);
+                faces.push(f as u32);
+            }
+        }
+        for (p, f) in samples {
+            points.push([p.x, p.y, p.z]);
+            faces.push(*f);
+        }
+        let tree = ImmutableKdTree::<f64, 3>::new_from_slice(&points).unwrap();
+        let k = std::num::NonZero::new(16).unwrap();
+        queries
+            .iter()
+            .map(|p| {
+                tree.query(&[p.x, p.y, p.z])
+                    .nearest_n::<SquaredEuclidean<f64>>(k)
+                    .execute()
+                    .iter()
+                    .map(|r| {
+                        let [a, b, c] = mesh.triangle(faces[r.item as usize] as usize);
+                        (closest_point_on_triangle(p, &a, &b, &c) - p).norm()
+                    })
+                    .fold(f64::INFINITY, f64::min)
+            })
+            .collect()
+    }
+
+    /// A mesh of `faces` random triangles (vertex indices taken modulo the vertex count, so
+    /// degenerate and repeated triangles occur) and query points: random ones in a box 4× the
+    /// mesh's, far ones (up to 1 km) and points on the surface.
+    fn mesh_and_queries() -> impl Strategy<Value = (TriangleMesh, Vec<Point3<f64>>)> {
+        let vertex = prop::array::uniform3(-1.0f32..1.0);
+        let query = prop::array::uniform3(-4.0f64..4.0);
+        (
+            prop::collection::vec(vertex, 3..60),
+            prop::collection::vec(prop::array::uniform3(0u32..1000), 1..120),
+            prop::collection::vec(query, 1..40),
+            prop::collection::vec(prop::array::uniform3(-1000.0f64..1000.0), 1..10),
+            prop::collection::vec((0usize..1000, 0.0f64..1.0, 0.0f64..1.0), 1..40),
+        )
+            .prop_map(|(positions, faces, near, far, on)| {
+                let n = positions.len() as u32;
+                let mesh = TriangleMesh::new(
+                    positions.into_iter().map(Point3::from).collect(),
+                    faces.into_iter().map(|f| f.map(|i| i % n)).collect(),
+                )
+                .unwrap();
+                let mut queries: Vec<Point3<f64>> =
+                    near.into_iter().chain(far).map(Point3::from).collect();
+                for (f, mut u, mut v) in on {
+                    if u + v > 1.0 {
+                        (u, v) = (1.0 - u, 1.0 - v);
+                    }
+                    let [a, b, c] = mesh.triangle(f % mesh.face_count());
+                    queries.push(a + (b - a) * u + (c - a) * v);
+                }
+                (mesh, queries)
+            })
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(256))]
+
+        /// Exact: equal to the minimum over all triangles, and never above the k-d tree's
+        /// minimum over a subset of them.
+        #[test]
+        fn distance_is_the_brute_force_minimum((mesh, queries) in mesh_and_queries()) {
+            let index = MeshDistance::new(&mesh, "test").unwrap();
+            let mut rng = Xoshiro256PlusPlus::seed_from_u64(1);
+            let samples = sample_surface(&mesh, 200, &mut rng);
+            let old = kd_tree_distances_m(&mesh, &samples, &queries);
+            for (p, old) in queries.iter().zip(old) {
+                let (new, exact) = (index.distance(p), brute_force_m(&mesh, p));
+                prop_assert!((new - exact).abs() <= 1e-12, "{p:?}: {new} against {exact}");
+                prop_assert!(new <= old + 1e-12, "{p:?}: {new} against the k-d tree's {old}");
+            }
+        }
+    }
+
+    /// A deep tree (thousands of faces of a noisy sphere): exact on points around it, inside
+    /// and outside.
+    #[test]
+    fn exact_on_a_large_mesh() {
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(7);
+        let (rings, segments) = (60, 80);
+        let mut positions = Vec::new();
+        for i in 0..=rings {
+            let theta = std::f32::consts::PI * i as f32 / rings as f32;
+            for j in 0..segments {
+                let phi = std::f32::consts::TAU * j as f32 / segments as f32;
+                let r = 1.0 + 0.05 * rng.random::<f32>();
+                positions.push(Point3::new(
+                    r * theta.sin() * phi.cos(),
+                    r * theta.sin() * phi.sin(),
+                    r * theta.cos(),
+                ));
+            }
+        }
+        let mut faces = Vec::new();
+        for i in 0..rings as u32 {
+            for j in 0..segments {
+                let (a, b) = (i * segments + j, i * segments + (j + 1) % segments);
+                let (c, d) = (a + segments, b + segments);
+                faces.push([a, b, d]);
+                faces.push([a, d, c]);
+            }
+        }
+        let mesh = TriangleMesh::new(positions, faces).unwrap();
+        let index = MeshDistance::new(&mesh, "sphere").unwrap();
+        let queries: Vec<Point3<f64>> = (0..2000)
+            .map(|_| {
+                let v = nalgebra::Vector3::new(
+                    rng.random::<f64>() - 0.5,
+                    rng.random::<f64>() - 0.5,
+                    rng.random::<f64>() - 0.5,
+                );
+                Point3::from(v * 3.0)
+            })
+            .collect();
+        let samples = sample_surface(&mesh, 20_000, &mut rng);
+        let old = kd_tree_distances_m(&mesh, &samples, &queries);
+        for (p, old) in queries.iter().zip(old) {
+            let (new, exact) = (index.distance(p), brute_force_m(&mesh, p));
+            assert!((new - exact).abs() <= 1e-12, "{p:?}: {new} against {exact}");
+            assert!(new <= old + 1e-12, "{p:?}: {new} against {old}");
+        }
+    }
+
+    #[test]
+    fn an_empty_mesh_is_an_error() {
+        let empty = TriangleMesh::default();
+        assert!(matches!(
+            MeshDistance::new(&empty, "ground truth"),
+            Err(MeshEvalError::EmptyMesh {
+                which: "ground truth",
+                hint: ""
+            })
+        ));
+        let config = MeshEvalConfig::default();
+        assert!(matches!(
+            evaluate_mesh(&square(0.0, 1.0), &empty, &config, None),
+            Err(MeshEvalError::EmptyMesh {
+                which: "ground truth",
+                ..
+            })
+        ));
+        assert!(matches!(
+            evaluate_mesh(&empty, &square(0.0, 1.0), &config, None),
+            Err(MeshEvalError::EmptyMesh {
+                which: "reconstruction",
+                ..
+            })
+        ));
+    }
+
+    /// Configurations written before the search became exact still parse.
+    #[test]
+    fn the_unused_neighbours_setting_still_parses() {
+        let config: MeshEvalConfig = serde_json::from_str(r#"{"neighbours": 8}"#).unwrap();
+        assert_eq!(config.neighbours, 8);
     }
 
     #[test]

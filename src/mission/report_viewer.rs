@@ -233,7 +233,7 @@ fn view_data(world: Option<&World>, target: &TargetReport, target_dir: &Path) ->
     let shown = decimate(&mesh, MAX_VIEW_TRIANGLES);
     let gt = world.and_then(|world| ground_truth_in_map_frame(world, target, target_dir, &mesh));
     let error: Option<Vec<f32>> = gt.as_ref().and_then(|gt| {
-        let index = MeshDistance::new(gt, &[], 16, "ground truth").ok()?;
+        let index = MeshDistance::new(gt, "ground truth").ok()?;
         Some(
             shown
                 .positions
