@@ -540,7 +540,7 @@ fn support_level(
 /// The edge of the support's top seen around a rock: per azimuth sector around the basal
 /// profile's axis, the largest radius of the scan's surface in the slabs seen from 1.5 to 15 cm
 /// below the support plane, up to `support_radius_m`, the narrowest of the highest few
-/// ([`edge_of_sector`]). Seen from the side, this is the pedestal's edge where the rock's
+/// (`edge_of_sector`). Seen from the side, this is the pedestal's edge where the rock's
 /// overhang hides the pedestal's top. The contact cannot reach beyond it.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SupportOutline {
