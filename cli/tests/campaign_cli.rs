@@ -67,7 +67,11 @@ fn small_world_campaign_tabulates_its_missions_and_resumes() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("campaign");
     let world = test_data("small_world.toml");
-    let config = test_data("small_mission.toml");
+    // The small mission, ended once its one target is mapped (the rest of its search adds
+    // nothing to the tables), so that two missions fit the test's time.
+    let config = dir.path().join("mission.toml");
+    let small = std::fs::read_to_string(test_data("small_mission.toml")).unwrap();
+    std::fs::write(&config, format!("{small}\nmax_targets = 1\n")).unwrap();
     // An earlier, interrupted campaign: seed 2 finished (a hand-made run, so that the test
     // flies only two missions), seed 1 was interrupted half-way, seed 0 never started.
     fake_run(&out.join("runs/small_world/seed-2"), 2);
@@ -85,7 +89,7 @@ fn small_world_campaign_tabulates_its_missions_and_resumes() {
         "--jobs",
         "2",
         "--config",
-        &config,
+        path_str(&config),
         "--out",
         path_str(&out),
         "--json",
@@ -96,6 +100,8 @@ fn small_world_campaign_tabulates_its_missions_and_resumes() {
     let totals: serde_json::Value = serde_json::from_slice(&run.stdout).expect("totals on stdout");
     assert_eq!(totals["runs"], 3, "{totals:#}");
     assert_eq!(totals["runs_finished"], 3, "{totals:#}");
+    // The flown runs ended at their target limit, which counts as a completed mission.
+    assert_eq!(totals["runs_completed"]["count"], 3, "{totals:#}");
     // One true target per run.
     assert_eq!(totals["targets_flown"]["of"], 3, "{totals:#}");
     // The finished run was left alone; the interrupted one ran again from a clean folder.

@@ -76,10 +76,15 @@ pub struct RunRow {
 }
 
 impl RunRow {
-    /// Whether the run finished and its mission ran to its end (`end_reason` `complete`), not
-    /// stopped by an error or a crash.
+    /// Whether the run finished and its mission ran to its end (`end_reason` `complete`, or
+    /// `target_limit` when the configuration capped the targets), not stopped by an error, a
+    /// timeout or a crash.
     pub fn completed_mission(&self) -> bool {
-        self.state == RunState::Finished && self.end_reason.as_deref() == Some("complete")
+        self.state == RunState::Finished
+            && matches!(
+                self.end_reason.as_deref(),
+                Some("complete" | "target_limit")
+            )
     }
 }
 

@@ -23,6 +23,10 @@ pub struct MissionConfig {
     pub map_camera_rate_hz: f64,
     /// The run stops (status `timeout`) after this much simulated time, seconds. Default 7200.
     pub max_sim_time_s: f64,
+    /// The flight ends (`"end_reason": "target_limit"`) once this many targets are finished
+    /// (mapped or incomplete), the rest of the search area unflown: a battery or a time slot
+    /// spent on the first rocks found. 0 (the default) searches the whole area.
+    pub max_targets: usize,
     /// A vehicle closer than this to terrain or a rock counts as a collision, metres.
     /// Default 0.3 (the airframe's radius).
     pub collision_radius_m: f64,
@@ -84,6 +88,7 @@ impl Default for MissionConfig {
             search_camera_rate_hz: 4.0,
             map_camera_rate_hz: 20.0,
             max_sim_time_s: 7200.0,
+            max_targets: 0,
             collision_radius_m: 0.3,
             duplicate_radius_m: 2.0,
             map_unconverged_targets: true,

@@ -233,7 +233,8 @@ pub struct ModeChange {
 pub struct MissionReport {
     /// The run was stopped (Ctrl-C) before the search finished.
     pub interrupted: bool,
-    /// Why the run ended: `complete`, `interrupted`, `timeout` or an error message.
+    /// Why the run ended: `complete`, `interrupted`, `timeout`, `crashed`, `target_limit`
+    /// (`max_targets` finished) or an error message.
     pub end_reason: String,
     /// The world (`default` or a file).
     pub world: String,

@@ -307,7 +307,12 @@ impl<'a> Mission<'a> {
                 break "interrupted".to_string();
             }
             if self.mode == Mode::Done {
-                break "complete".to_string();
+                break if self.target_limit_reached() {
+                    "target_limit"
+                } else {
+                    "complete"
+                }
+                .to_string();
             }
             if self.crashed {
                 break "crashed".to_string();
@@ -332,6 +337,14 @@ impl<'a> Mission<'a> {
 
     fn count(&self, status: TargetStatus) -> usize {
         self.targets.values().filter(|t| t.status == status).count()
+    }
+
+    /// Whether `max_targets` (when set) targets have been through Map mode.
+    fn target_limit_reached(&self) -> bool {
+        let max_targets = self.inputs.config.max_targets;
+        max_targets > 0
+            && self.count(TargetStatus::Mapped) + self.count(TargetStatus::Incomplete)
+                >= max_targets
     }
 
     /// One camera period: fly, take a frame, act on it.
@@ -480,7 +493,15 @@ impl<'a> Mission<'a> {
                 timings.map_s += clock.elapsed().as_secs_f64();
                 if complete || self.sensors.vehicle().trajectory_done() {
                     self.finish_mapping(id, timings)?;
-                    self.resume_search(timings)?;
+                    if self.target_limit_reached() {
+                        tracing::info!(
+                            "{} targets finished (`max_targets`): the flight ends",
+                            self.inputs.config.max_targets
+                        );
+                        self.set_mode(Mode::Done);
+                    } else {
+                        self.resume_search(timings)?;
+                    }
                 }
             }
             Mode::Done => {}
