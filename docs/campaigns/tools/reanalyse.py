@@ -15,6 +15,7 @@ Prints, over every mesh of a target (mapped or not) that `mission.json` names:
 - the totals: targets, refused, |α error| ≤ 2° (a refusal counts as a miss), α over by more
   than 3°, the truth inside the interval and the interval's median width;
 - per rock (world and id): n, median, least and greatest error, coverage, median width;
+- the refusals, counted per rock and kind of reason;
 - with `--models`, per profile model and fit window (the 12 readings at the measured plane of
   `ContactHypothesis::ensemble`), the share of scans read within 2°.
 
@@ -70,11 +71,11 @@ def main():
             key = (label, alpha, low, high)
             if key not in seen:
                 seen.add(key)
-                rows.append((label, truth, alpha, low, high, readings.get(label)))
+                rows.append((label, truth, alpha, low, high, readings.get(label), None))
         for label, (truth, reason) in refused.items():
             if (label, reason) not in seen:
                 seen.add((label, reason))
-                rows.append((label, truth, None, None, None, None))
+                rows.append((label, truth, None, None, None, None, reason))
     ok = [r for r in rows if r[2] is not None]
     if not ok:
         sys.exit("no analysed target")
@@ -95,6 +96,16 @@ def main():
         print(f"  {rock[:56]:56s} n {len(rs):3d}  error median {statistics.median(errors):+.2f} "
               f"[{min(errors):+.2f}, {max(errors):+.2f}]  cover {covered}/{len(rs)}  "
               f"width {statistics.median(r[4] - r[3] for r in rs):.2f}")
+    # Refusals count as misses in the totals; where they fall, and why, is what to fix next.
+    refusals = collections.Counter()
+    for r in rows:
+        if r[2] is None:
+            # The reason's kind: its text with every figure replaced by N.
+            reason = r[6].removeprefix("fragility: ").removeprefix("degenerate geometry: ")
+            kind = re.sub(r"\d+(\.\d+)?", "N", reason)
+            refusals[(re.sub(r"_seed-\d+", "", r[0])[:56], kind[:70])] += 1
+    for (rock, kind), n in sorted(refusals.items(), key=lambda kv: (-kv[1], kv[0])):
+        print(f"  refused {n:3d}  {rock:56s} {kind}")
     if a.models:
         with_readings = [r for r in ok if r[5]]
         for i, name in enumerate(MODELS):
