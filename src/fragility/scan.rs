@@ -126,7 +126,8 @@ pub struct ScanConfig {
     /// more than [`SUPPORT_ROUGHNESS_BAND_M`] below the highest one that fills this many sectors
     /// (it is then the ground under the support), that highest level is the support's top seen
     /// on part of the turn ([`ClosedScan::partial_support`]): the contact is read at the neck,
-    /// and its height's doubt reaches down (and up) to that level. Default 6, half the turn: a
+    /// and its height's doubt reaches down (and up) to that level. A level that high above the
+    /// neck is taken as the plane instead: the neck then lies in the pedestal. Default 6, half the turn: a
     /// rock on another rock (the double rock) sits where the lower rock's top falls away on one
     /// side. In the mission meshes of sessions 37–39 (206 targets), the plane-less scans that no
     /// other rule refused were 8 double rocks, each with a half-turn level 1.2–4.3 cm below its
@@ -445,7 +446,10 @@ impl SupportPlane {
 /// [`SUPPORT_ROUGHNESS_BAND_M`] of it. A partial level farther above the plane than that is
 /// what the rock stands on, and the plane below it the ground: library-a seed 39's double rock
 /// had its ledge one sector short of a plane, the ground 25 cm down was read as the plane, and
-/// α_min read 20.06° against 4.48°.
+/// α_min read 20.06° against 4.48°. A partial level farther above the neck than the band is the
+/// plane: the neck was read inside the pedestal, whose side the rock's overhang hides just under
+/// its top (a noisy scan of library-b's wide block, fused with true poses: neck 6.7 cm under its
+/// top seen in 6 of 12 directions, α_min read at the neck 51.6° against 17.5°).
 fn support_top(
     mesh: &TriangleMesh,
     axis_xy: &Point2<f64>,
@@ -456,6 +460,7 @@ fn support_top(
     let full = support_level(&faces, neck_z, config, config.support_min_sectors);
     let half = support_level(&faces, neck_z, config, config.partial_support_min_sectors);
     match (full, half) {
+        (_, Some(h)) if h.height_m > neck_z + SUPPORT_ROUGHNESS_BAND_M => (Some(h), None),
         (Some(f), Some(h)) if h.height_m > f.height_m + SUPPORT_ROUGHNESS_BAND_M => (None, Some(h)),
         (Some(f), _) => (Some(f), None),
         (None, h) => (None, h),
@@ -2036,6 +2041,33 @@ mod tests {
             plane.is_some_and(|p| (p.height_m - ground_z).abs() < 1e-4),
             "{plane:?}"
         );
+    }
+
+    /// A support seen around half the turn above the neck is where the rock stands: the neck
+    /// was read inside the pedestal below it. A noisy scan of library-b's wide block fused with
+    /// true poses had its pedestal's side thinned just under the top, the neck 6.7 cm down in
+    /// the pedestal, and its top seen in 6 of 12 directions; read at the neck, α_min came out
+    /// 51.6° against 17.5°, its interval 10° wide and far from the truth.
+    #[test]
+    fn a_half_turn_support_above_the_neck_is_the_contact() {
+        let config = FragilityConfig::default();
+        let bare = close_scan(&open_scan(), &config.scan).unwrap();
+        let ledge_z = bare.neck_height_m + 0.05;
+        let closed = close_scan(&open_scan_with_half_ledge(ledge_z), &config.scan).unwrap();
+        let plane = closed
+            .support_plane
+            .expect("the ledge above the neck is the support");
+        assert!((plane.height_m - ledge_z).abs() < 1e-4, "{plane:?}");
+        assert!(closed.partial_support.is_none());
+        assert!((closed.contact_height_m() - ledge_z).abs() < 1e-4);
+        // Below the neck, the same ledge is only the height's doubt (the double rock's case).
+        let below = close_scan(
+            &open_scan_with_half_ledge(bare.neck_height_m - 0.05),
+            &config.scan,
+        )
+        .unwrap();
+        assert!(below.support_plane.is_none());
+        assert_eq!(below.contact_height_m(), below.neck_height_m);
     }
 
     /// A support seen around half the turn, a few centimetres below the neck, is read as the

@@ -41,14 +41,13 @@ use super::catalog::{Catalog, MissionTarget, TargetStatus};
 use super::config::MissionConfig;
 use super::mapping::{
     MappingSession, RecenterStep, Recentering, cylinder_around, cylinder_radius_m,
-    cylinder_seen_in_frame, finish_target, mapped_status,
+    cylinder_seen_in_frame, finish_target, ground_height_near, mapped_status,
 };
 use super::mode::{FlightLogEntry, Mode};
 use super::perception::{Perception, TargetState};
 use super::record::FlightOrigin;
 use super::report::{MissionReport, ModeChange, StageTimings};
 use super::sensors::{Recorded, Sensors};
-use super::simulation::ground_height_near;
 use crate::detection::simulated::roles_from_boxes;
 
 /// What to process and how.
@@ -294,7 +293,7 @@ pub fn process_flight(inputs: &ProcessInputs<'_>) -> MissionResult<MissionReport
                         &camera,
                         estimate,
                         &old,
-                        config.cylinder.max_recenter_m,
+                        &config.cylinder,
                     )?;
                     match recentering.step(seen) {
                         RecenterStep::Move { cylinder, moved_m } => {

@@ -37,6 +37,7 @@ use super::sensors::{Sensors, Simulated};
 
 use super::mapping::{
     RecenterStep, Recentering, cylinder_around, cylinder_radius_m, cylinder_seen_in_frame,
+    ground_height_near,
 };
 
 /// The map's frame is handed back to the estimate once the vehicle's reference is this close
@@ -50,38 +51,6 @@ struct SearchProgress {
     /// Index of the first waypoint not yet reached.
     next: usize,
     altitude_m: f64,
-}
-
-/// Median height of the depth points in a ring from `1.5·radius + 0.5` to `1.5·radius + 3`
-/// metres (horizontally) around `center`: the ground around a target, seen from
-/// `world_from_camera`. `None` with fewer than 50 such points.
-pub fn ground_height_near(
-    camera: &PinholeCamera,
-    depth_m: &scarp_slam::image::DepthImage,
-    world_from_camera: &Isometry3<f64>,
-    center: &Point3<f64>,
-    radius_m: f64,
-) -> Option<f64> {
-    let (r_in, r_out) = (1.5 * radius_m + 0.5, 1.5 * radius_m + 3.0);
-    let mut heights = Vec::new();
-    for v in (0..depth_m.height()).step_by(4) {
-        for (u, &d) in depth_m.row(v).iter().enumerate().step_by(4) {
-            if d <= 0.0 {
-                continue;
-            }
-            let p = world_from_camera
-                * camera.unproject(&nalgebra::Point2::new(u as f64, f64::from(v)), f64::from(d));
-            let r = (p.x - center.x).hypot(p.y - center.y);
-            if r >= r_in && r <= r_out {
-                heights.push(p.z);
-            }
-        }
-    }
-    if heights.len() < 50 {
-        return None;
-    }
-    heights.sort_by(f64::total_cmp);
-    Some(heights[heights.len() / 2])
 }
 
 /// Inputs of a mission run.
@@ -807,15 +776,17 @@ impl<'a> Mission<'a> {
             self.sensors.camera(),
             estimate,
             &old,
-            config.cylinder.max_recenter_m,
+            &config.cylinder,
         )?;
         let (cylinder, moved_m) = match self.recentering.step(seen) {
             RecenterStep::Wait => return Ok(false),
             RecenterStep::Map => return Ok(true),
             RecenterStep::Move { cylinder, moved_m } => (cylinder, moved_m),
         };
+        let rise_m = cylinder.z_bottom_m - old.z_bottom_m;
         tracing::info!(
-            "target {id}: map cylinder moved {moved_m:.2} m to where the first mapped frames see it"
+            "target {id}: map cylinder moved {moved_m:.2} m across and {rise_m:+.2} m up to where \
+             the first mapped frames see it"
         );
         if let Some(session) = self.mapping.as_mut() {
             session.recenter(&cylinder, &self.inputs.config)?;
