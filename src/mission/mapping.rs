@@ -1033,7 +1033,7 @@ mod tests {
             .unwrap();
         let frame =
             RgbdFrame::new(0.0, rendered.rgb, rendered.depth_m, Some(rendered.instance)).unwrap();
-        let mut perception = super::super::perception::Perception::new(&world, &config, 3).unwrap();
+        let mut perception = Perception::new(&world, &config, 3).unwrap();
         let mut seen_from = |world_from_camera: &Isometry3<f64>| {
             cylinder_seen_in_frame(
                 &mut perception,
