@@ -36,13 +36,21 @@ use super::safety::SafetyLog;
 use super::sensors::{Sensors, Simulated};
 
 use super::mapping::{
-    RecenterStep, Recentering, cylinder_around, cylinder_radius_m, cylinder_seen_in_frame,
-    ground_height_near,
+    RECENTER_AGREEMENT_M, RecenterStep, Recentering, cylinder_around, cylinder_radius_m,
+    cylinder_seen_in_frame, ground_height_near,
 };
 
 /// The map's frame is handed back to the estimate once the vehicle's reference is this close
 /// below the search altitude, metres: out of the target's way, its climb done.
 const CLEAR_OF_TARGET_BELOW_SEARCH_M: f64 = 0.5;
+
+/// How far from a target's cylinder a world obstacle may stand and still be that target seen
+/// from the frame the vehicle flies in, metres: 4σ of the state estimate's horizontal error
+/// plus [`RECENTER_AGREEMENT_M`], the spread of the views that placed the cylinder. 2.4 m with
+/// the `gps` estimator, 0.48 m with `rtk`.
+fn target_reach_m(estimator: &scarp_datasets::estimator::EstimatorConfig) -> f64 {
+    4.0 * estimator.horizontal_sigma_m + RECENTER_AGREEMENT_M
+}
 
 /// Where the lawn-mower was left, to resume it.
 #[derive(Debug, Clone)]
@@ -811,19 +819,23 @@ impl<'a> Mission<'a> {
     }
 
     /// Plans the mapping rings around `cylinder` from where the vehicle is and starts flying
-    /// them; on an error the current trajectory is kept.
+    /// them; on an error the current trajectory is kept. The planner sees the target as its
+    /// cylinder, in the frame the vehicle flies in, not as the world's mesh of it
+    /// ([`Environment::with_target`]): any obstacle within [`target_reach_m`] of the cylinder
+    /// is taken for the target.
     fn fly_rings_around(&mut self, cylinder: &VerticalCylinder) -> MissionResult<RingPlan> {
         let config = &self.inputs.config;
+        let env = self
+            .env
+            .with_target(cylinder, target_reach_m(&config.estimator));
         let rings = config.planning.rings_around(
             cylinder,
             &self.sensors.vehicle().current_waypoint(),
-            &self.env,
+            &env,
         )?;
-        self.sensors.vehicle_mut().follow(
-            &rings.path.waypoints[1..],
-            &self.env,
-            &config.planning,
-        )?;
+        self.sensors
+            .vehicle_mut()
+            .follow(&rings.path.waypoints[1..], &env, &config.planning)?;
         Ok(rings)
     }
 
