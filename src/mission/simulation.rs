@@ -35,22 +35,15 @@ use super::report::{MissionReport, ModeChange, StageTimings};
 use super::safety::SafetyLog;
 use super::sensors::{Sensors, Simulated};
 
+use super::environment::target_reach_m;
 use super::mapping::{
-    RECENTER_AGREEMENT_M, RecenterStep, Recentering, cylinder_around, cylinder_radius_m,
-    cylinder_seen_in_frame, ground_height_near,
+    RecenterStep, Recentering, cylinder_around, cylinder_radius_m, cylinder_seen_in_frame,
+    ground_height_near,
 };
 
 /// The map's frame is handed back to the estimate once the vehicle's reference is this close
 /// below the search altitude, metres: out of the target's way, its climb done.
 const CLEAR_OF_TARGET_BELOW_SEARCH_M: f64 = 0.5;
-
-/// How far from a target's cylinder a world obstacle may stand and still be that target seen
-/// from the frame the vehicle flies in, metres: 4σ of the state estimate's horizontal error
-/// plus [`RECENTER_AGREEMENT_M`], the spread of the views that placed the cylinder. 2.4 m with
-/// the `gps` estimator, 0.48 m with `rtk`.
-fn target_reach_m(estimator: &scarp_datasets::estimator::EstimatorConfig) -> f64 {
-    4.0 * estimator.horizontal_sigma_m + RECENTER_AGREEMENT_M
-}
 
 /// Where the lawn-mower was left, to resume it.
 #[derive(Debug, Clone)]
