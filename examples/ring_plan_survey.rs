@@ -18,7 +18,7 @@ use std::collections::BTreeMap;
 use anyhow::{Context, Result};
 use nalgebra::{Point3, Vector3};
 use scarp::mission::config::MissionConfig;
-use scarp::mission::environment::{planning_environment, target_reach_m};
+use scarp::mission::environment::planning_environment;
 use scarp::mission::mapping::rock_cylinder;
 use scarp_datasets::world::{RockRole, World};
 use scarp_planning::prelude::{Repair, Waypoint};
@@ -96,8 +96,6 @@ fn main() -> Result<()> {
             for (dx, dy) in [(0.0, 0.0), (0.0, 0.5), (0.5, 0.0), (0.0, -0.5), (-0.5, 0.0)] {
                 let shift = Vector3::new(dx, dy, 0.0);
                 let cylinder = rock_cylinder(&world, rock, &shift, &config.cylinder)?;
-                // As the mission plans: the target is its cylinder, wherever the world's mesh is.
-                let env = env.with_target(&cylinder, target_reach_m(&config.estimator));
                 for k in 0..16 {
                     let azimuth = std::f64::consts::TAU * f64::from(k) / 16.0;
                     for distance_m in [2.0, 5.0, 10.0] {

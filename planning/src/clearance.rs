@@ -9,14 +9,14 @@
 //! Clearance is the Euclidean distance from the vehicle's position to the nearest surface,
 //! negative when the position is under the terrain or inside an obstacle.
 
-use nalgebra::Point3;
+use nalgebra::{Point3, Vector3};
 use parry3d::math::Vector as PVec;
 use parry3d::query::{PointQuery, Ray, RayCast};
 use parry3d::shape::{TriMesh, TriMeshFlags};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{PlanError, check_point, check_positive};
-use crate::geometry::{Path, VerticalCylinder, Waypoint};
+use crate::geometry::{Path, Waypoint};
 use crate::minsnap::{MinSnapConfig, StartState, Trajectory, plan_min_snap};
 use crate::terrain::{Heightfield, Obstacle};
 use crate::terrain_distance::TerrainDistance;
@@ -269,7 +269,7 @@ impl ObstacleShape {
     fn clearance_lower_bound(&self, p: &Point3<f64>) -> f64 {
         match self {
             ObstacleShape::Mesh { lo_m, hi_m, .. } => {
-                let outside = (lo_m - p).sup(&(p - hi_m)).sup(&nalgebra::Vector3::zeros());
+                let outside = (lo_m - p).sup(&(p - hi_m)).sup(&Vector3::zeros());
                 outside.norm()
             }
             ObstacleShape::Cylinder { .. } => self.clearance(p),
@@ -307,13 +307,29 @@ impl ObstacleShape {
         }
     }
 
-    /// The centre of the shape's bounding box, horizontally (world metres).
-    fn center_xy(&self) -> [f64; 2] {
+    /// The shape moved by `offset_m` (world metres).
+    fn moved(&self, offset_m: &Vector3<f64>) -> Self {
         match self {
-            ObstacleShape::Mesh { lo_m, hi_m, .. } => {
-                [0.5 * (lo_m.x + hi_m.x), 0.5 * (lo_m.y + hi_m.y)]
-            }
-            ObstacleShape::Cylinder { cx, cy, .. } => [*cx, *cy],
+            ObstacleShape::Mesh {
+                mesh,
+                origin_m,
+                oriented,
+                lo_m,
+                hi_m,
+            } => ObstacleShape::Mesh {
+                mesh: mesh.clone(),
+                origin_m: origin_m + offset_m,
+                oriented: *oriented,
+                lo_m: lo_m + offset_m,
+                hi_m: hi_m + offset_m,
+            },
+            ObstacleShape::Cylinder { cx, cy, r, z0, z1 } => ObstacleShape::Cylinder {
+                cx: cx + offset_m.x,
+                cy: cy + offset_m.y,
+                r: *r,
+                z0: z0 + offset_m.z,
+                z1: z1 + offset_m.z,
+            },
         }
     }
 
@@ -377,38 +393,20 @@ impl Environment {
         }
     }
 
-    /// This environment with every obstacle that stands where `target` is (the centre of its
-    /// bounding box within `target`'s radius plus `reach_m` of its axis, horizontally) replaced
-    /// by `target` itself, a solid cylinder; the terrain and the other obstacles are kept, and
-    /// so are the obstacles' indices.
+    /// This environment with every obstacle moved by `offset_m` (world metres) and the terrain
+    /// kept: the obstacles as seen from a frame that is `offset_m` off the world's.
     ///
-    /// Why: the vehicle flies round a target in the frame where its camera sees it, which the
-    /// state estimate's error offsets from the world's. There the rock stands in its cylinder,
-    /// and the world's mesh of it, checked at its true place, stands metres to one side: on
+    /// Why: the vehicle flies round a target in the frame where its camera sees it (the map's,
+    /// anchored at the state estimate), which the estimate's error offsets from the world's.
+    /// There the rocks stand where the camera sees them, not at their true places: on
     /// library-b seed 50 the estimate was 1.64 m off when mapping began, and the base ring,
     /// planned round the cylinder the first frames saw, was dropped for passing 0.28 m inside
-    /// the block it circled.
-    pub fn with_target(&self, target: &VerticalCylinder, reach_m: f64) -> Self {
-        let axis = [target.center_x_m, target.center_y_m];
-        let shape = ObstacleShape::Cylinder {
-            cx: target.center_x_m,
-            cy: target.center_y_m,
-            r: target.radius_m,
-            z0: target.z_bottom_m,
-            z1: target.z_top_m,
-        };
-        let obstacles = self
-            .obstacles
-            .iter()
-            .map(|o| {
-                let [x, y] = o.center_xy();
-                if (x - axis[0]).hypot(y - axis[1]) <= target.radius_m + reach_m {
-                    shape.clone()
-                } else {
-                    o.clone()
-                }
-            })
-            .collect();
+    /// the block it circled, checked at the block's true place; planned round the block's
+    /// cylinder alone, it was dropped for passing 1.29 m from a boulder 5 m away, which in
+    /// truth it cleared by 1.6 m. The terrain is a map of the world (a DEM), which the estimate's
+    /// error does not move.
+    pub fn with_obstacles_moved(&self, offset_m: &Vector3<f64>) -> Self {
+        let obstacles = self.obstacles.iter().map(|o| o.moved(offset_m)).collect();
         Self {
             terrain: self.terrain.clone(),
             obstacles,
@@ -744,37 +742,54 @@ mod tests {
         }
     }
 
-    /// Seen round a target whose cylinder the estimate's error puts 1.5 m beside the world's
-    /// cube, the planner keeps clear of the cylinder, not of the cube; a cube farther than the
-    /// reach is kept, and so are the indices.
+    /// Seen from a frame 1.5 m off the world's, the obstacles stand 1.5 m away from their true
+    /// places, mesh and cylinder alike; the terrain stays, and so do the indices.
     #[test]
-    fn a_target_replaces_the_obstacles_within_its_reach() {
-        let far = Obstacle::Cylinder {
+    fn obstacles_move_into_the_frame_the_vehicle_flies_in() {
+        let cylinder = Obstacle::Cylinder {
             center_x_m: 0.0,
             center_y_m: 0.0,
             radius_m: 1.0,
             z_bottom_m: 0.0,
             z_top_m: 2.0,
         };
-        let env = Environment::new(None, &[far, unit_cube_at_10_0_1()]).unwrap();
-        let target = VerticalCylinder::new(11.5, 0.0, 0.6, 0.0, 2.0).unwrap();
-        let seen = env.with_target(&target, 1.0);
-        // Inside the world's cube, clear of the cylinder.
-        let in_cube = Point3::new(10.0, 0.0, 1.0);
-        assert!(env.clearance_at(&in_cube).unwrap().clearance_m < 0.0);
-        let c = seen.clearance_at(&in_cube).unwrap();
-        assert!((c.clearance_m - 0.9).abs() < 1e-9, "{c:?}");
-        assert_eq!(c.source, ClearanceSource::Obstacle(1));
-        // Inside the cylinder.
-        let c = seen.clearance_at(&Point3::new(11.5, 0.3, 1.0)).unwrap();
-        assert!((c.clearance_m + 0.3).abs() < 1e-9, "{c:?}");
-        // The obstacle 11.5 m away stays.
-        let c = seen.clearance_at(&Point3::new(0.0, 0.0, 1.0)).unwrap();
-        assert_eq!(c.source, ClearanceSource::Obstacle(0));
-        assert!(c.clearance_m < 0.0);
-        // Out of reach, the cube stays too.
-        let short = env.with_target(&target, 0.2);
-        assert!(short.clearance_at(&in_cube).unwrap().clearance_m < 0.0);
+        let hf = Heightfield::flat(-50.0, -50.0, 1.0, 101, 101, -3.0).unwrap();
+        let env = Environment::new(Some(hf), &[cylinder, unit_cube_at_10_0_1()]).unwrap();
+        let offset = Vector3::new(1.5, 0.0, 0.2);
+        let seen = env.with_obstacles_moved(&offset);
+        for (p, index) in [
+            (Point3::new(12.5, 0.0, 1.0), 1),
+            (Point3::new(10.0, 0.0, 1.0), 1),
+            (Point3::new(-2.0, 0.3, 1.0), 0),
+            (Point3::new(0.2, 0.1, 1.0), 0),
+        ] {
+            let before = env.clearance_at(&p).unwrap();
+            let after = seen.clearance_at(&(p + offset)).unwrap();
+            assert_eq!(after.source, ClearanceSource::Obstacle(index), "{p}");
+            assert!(
+                (after.clearance_m - before.clearance_m).abs() < 1e-5,
+                "{p}: {before:?} → {after:?}"
+            );
+        }
+        // The terrain does not move.
+        let high = Point3::new(30.0, 30.0, -1.0);
+        assert_eq!(
+            seen.clearance_at(&high).unwrap().clearance_m,
+            env.clearance_at(&high).unwrap().clearance_m
+        );
+        // Inside the cube's true place, clear of where it is seen.
+        assert!(
+            env.clearance_at(&Point3::new(9.6, 0.0, 1.0))
+                .unwrap()
+                .clearance_m
+                < 0.0
+        );
+        assert!(
+            seen.clearance_at(&Point3::new(9.6, 0.0, 1.0))
+                .unwrap()
+                .clearance_m
+                > 0.5
+        );
     }
 
     #[test]

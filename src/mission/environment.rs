@@ -2,7 +2,6 @@
 //! a mesh obstacle, for planning, the clearance checks and the collision log.
 
 use super::error::MissionResult;
-use super::mapping::RECENTER_AGREEMENT_M;
 use scarp_datasets::world::World;
 use scarp_planning::prelude::{Environment, Obstacle};
 
@@ -34,14 +33,6 @@ pub fn world_obstacles(world: &World) -> impl Iterator<Item = (String, &scarp_sl
                 .map(|p| (format!("pedestal {}", r.id), p)),
         )
     })
-}
-
-/// How far from a target's cylinder a world obstacle may stand and still be that target seen
-/// from the frame the vehicle flies in, metres: 4σ of the state estimate's horizontal error
-/// plus [`RECENTER_AGREEMENT_M`], the spread of the views that placed the cylinder. 2.4 m with
-/// the `gps` estimator, 0.48 m with `rtk`.
-pub fn target_reach_m(estimator: &scarp_datasets::estimator::EstimatorConfig) -> f64 {
-    4.0 * estimator.horizontal_sigma_m + RECENTER_AGREEMENT_M
 }
 
 #[cfg(test)]

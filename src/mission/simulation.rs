@@ -35,7 +35,6 @@ use super::report::{MissionReport, ModeChange, StageTimings};
 use super::safety::SafetyLog;
 use super::sensors::{Sensors, Simulated};
 
-use super::environment::target_reach_m;
 use super::mapping::{
     RecenterStep, Recentering, cylinder_around, cylinder_radius_m, cylinder_seen_in_frame,
     ground_height_near,
@@ -812,15 +811,12 @@ impl<'a> Mission<'a> {
     }
 
     /// Plans the mapping rings around `cylinder` from where the vehicle is and starts flying
-    /// them; on an error the current trajectory is kept. The planner sees the target as its
-    /// cylinder, in the frame the vehicle flies in, not as the world's mesh of it
-    /// ([`Environment::with_target`]): any obstacle within [`target_reach_m`] of the cylinder
-    /// is taken for the target.
+    /// them; on an error the current trajectory is kept. The planner sees the rocks where the
+    /// camera does, in the frame the vehicle flies in ([`Environment::with_obstacles_moved`]
+    /// by [`Self::navigation_error_m`]), not at their true places.
     fn fly_rings_around(&mut self, cylinder: &VerticalCylinder) -> MissionResult<RingPlan> {
+        let env = self.env.with_obstacles_moved(&self.navigation_error_m());
         let config = &self.inputs.config;
-        let env = self
-            .env
-            .with_target(cylinder, target_reach_m(&config.estimator));
         let rings = config.planning.rings_around(
             cylinder,
             &self.sensors.vehicle().current_waypoint(),
