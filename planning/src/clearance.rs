@@ -9,6 +9,8 @@
 //! Clearance is the Euclidean distance from the vehicle's position to the nearest surface,
 //! negative when the position is under the terrain or inside an obstacle.
 
+use std::sync::Arc;
+
 use nalgebra::{Point3, Vector3};
 use parry3d::math::Vector as PVec;
 use parry3d::query::{PointQuery, Ray, RayCast};
@@ -183,7 +185,8 @@ impl ClearanceReport {
 #[derive(Debug, Clone)]
 enum ObstacleShape {
     Mesh {
-        mesh: Box<TriMesh>,
+        /// Shared: moving an environment into another frame copies no mesh.
+        mesh: Arc<TriMesh>,
         origin_m: Point3<f64>,
         oriented: bool,
         /// The mesh's bounding box (world ENU, m): its distance bounds the clearance from
@@ -241,7 +244,7 @@ impl ObstacleShape {
                     },
                 );
                 Ok(Self::Mesh {
-                    mesh: Box::new(mesh),
+                    mesh: Arc::new(mesh),
                     origin_m: origin,
                     oriented,
                     lo_m,
@@ -317,7 +320,7 @@ impl ObstacleShape {
                 lo_m,
                 hi_m,
             } => ObstacleShape::Mesh {
-                mesh: mesh.clone(),
+                mesh: Arc::clone(mesh),
                 origin_m: origin_m + offset_m,
                 oriented: *oriented,
                 lo_m: lo_m + offset_m,

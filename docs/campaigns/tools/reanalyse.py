@@ -33,6 +33,12 @@ from concurrent.futures import ThreadPoolExecutor
 MODELS = [f"{m}-skip{s}-fit{f}" for m in ("r2", "r") for s in (0, 1) for f in (3, 4, 6)]
 
 
+def refusal_kind(reason):
+    """A refusal's kind: its text without the error's prefixes, every figure replaced by N."""
+    reason = reason.removeprefix("fragility: ").removeprefix("degenerate geometry: ")
+    return re.sub(r"\d+(\.\d+)?", "N", reason)
+
+
 def run(binary, config, campaign):
     args = [binary, campaign] + ([config] if config else [])
     return subprocess.run(args, capture_output=True, text=True, check=True).stdout
@@ -100,9 +106,7 @@ def main():
     refusals = collections.Counter()
     for r in rows:
         if r[2] is None:
-            # The reason's kind: its text with every figure replaced by N.
-            reason = r[6].removeprefix("fragility: ").removeprefix("degenerate geometry: ")
-            kind = re.sub(r"\d+(\.\d+)?", "N", reason)
+            kind = refusal_kind(r[6])
             refusals[(re.sub(r"_seed-\d+", "", r[0])[:56], kind[:70])] += 1
     for (rock, kind), n in sorted(refusals.items(), key=lambda kv: (-kv[1], kv[0])):
         print(f"  refused {n:3d}  {rock:56s} {kind}")

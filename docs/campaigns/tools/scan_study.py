@@ -24,6 +24,9 @@ import subprocess
 import sys
 from concurrent.futures import ThreadPoolExecutor
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from reanalyse import refusal_kind  # noqa: E402
+
 
 def run(cmd, **kw):
     return subprocess.run(cmd, capture_output=True, text=True, **kw)
@@ -71,7 +74,9 @@ def analyse(scarp, mesh):
     r = run([scarp, "fragility", "--scan", "--json", mesh])
     if r.returncode:
         lines = r.stderr.strip().splitlines()
-        return {"refused": lines[-1] if lines else "exit %d" % r.returncode}
+        # The CLI's last line names the mesh, then gives the analysis' reason.
+        return {"refused": lines[-1].split(mesh + ": ", 1)[-1] if lines
+                else "exit %d" % r.returncode}
     return json.loads(r.stdout)
 
 
@@ -80,10 +85,6 @@ def truth(scarp, out, world, rock):
     r = run([scarp, "fragility", "--json", os.path.join(gt, "rock_%d.ply" % rock["id"]),
              "--pedestal", os.path.join(gt, rock["pedestal_mesh"])])
     return json.loads(r.stdout)["alpha_min_deg"]
-
-
-def reason_kind(text):
-    return "".join("N" if c.isdigit() else c for c in text.split(": ", 2)[-1])[:110]
 
 
 def main():
@@ -120,7 +121,7 @@ def main():
         for (world, rock, alpha, seed), res in zip(cases, results[b]):
             n += 1
             if "refused" in res:
-                k = reason_kind(res["refused"])
+                k = refusal_kind(res["refused"])[:110]
                 kinds[k] = kinds.get(k, 0) + 1
                 print("%-10s rock %2d seed %2d  truth %6.2f  refused: %s"
                       % (world, rock["id"], seed, alpha, res["refused"][-120:]))
