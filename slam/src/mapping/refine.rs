@@ -320,7 +320,8 @@ pub struct RefinedMap {
     /// The noise the last solve weighted with, when [`RefineConfig::estimate_noise`] estimated
     /// it.
     pub estimated_noise: Option<EstimatedNoise>,
-    /// Wall times, milliseconds: landmark tracking, bundle adjustment, re-integration, meshing.
+    /// Wall times, milliseconds: landmark tracking, bundle adjustment, re-integration, meshing,
+    /// and the fusion and meshing of `mesh_before` (0 without it).
     pub landmarks_ms: f64,
     /// See `landmarks_ms`.
     pub ba_ms: f64,
@@ -328,6 +329,8 @@ pub struct RefinedMap {
     pub reintegrate_ms: f64,
     /// See `landmarks_ms`.
     pub mesh_ms: f64,
+    /// See `landmarks_ms`.
+    pub mesh_before_ms: f64,
 }
 
 /// Runs landmarks → bundle adjustment → re-integration → mesh on a target's keyframes.
@@ -491,6 +494,7 @@ pub fn refine_keyframes(
             config.between_max_correction_change_deg.to_radians(),
         )
     };
+    let started = Instant::now();
     let mesh_before = if config.mesh_before {
         let volume = fuse_in_order(
             camera,
@@ -501,6 +505,7 @@ pub fn refine_keyframes(
     } else {
         None
     };
+    let mesh_before_ms = started.elapsed().as_secs_f64() * 1e3;
     let started = Instant::now();
     let tsdf_adjusted = TsdfConfig {
         roi: config
@@ -527,6 +532,7 @@ pub fn refine_keyframes(
         ba_ms,
         reintegrate_ms,
         mesh_ms,
+        mesh_before_ms,
     })
 }
 
