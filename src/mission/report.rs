@@ -129,7 +129,8 @@ pub struct TargetReport {
     pub fscore_1cm: Option<f64>,
     /// F-score at τ = 2 cm, as [`Self::fscore_1cm`].
     pub fscore_2cm: Option<f64>,
-    /// F-score at τ = 2 cm of the keyframes fused at their odometry poses (before BA).
+    /// F-score at τ = 2 cm of the tracking volume's mesh: every mapped frame fused at its
+    /// odometry pose as it was tracked, the map before BA.
     pub fscore_2cm_before_ba: Option<f64>,
     /// Mean distance from the mesh (within 10 cm of the rock's box) to the nearer of the true
     /// rock and its pedestal, metres.
