@@ -306,6 +306,38 @@ mod tests {
         assert_eq!(table[0], -table[65535]);
     }
 
+    /// The RGB noise as the formula states it, with no table and no bound on the offsets:
+    /// round(σ·Φ⁻¹(p)) at the pixel's three 16-bit draws, added and clamped, at the default σ
+    /// and at one that takes many channels past 0 and 255. (Holding the table to ±256 as i16,
+    /// half the size, was tried: no faster.)
+    #[test]
+    fn rgb_noise_is_the_rounded_normal_formula_for_any_sigma() {
+        for rgb_sigma in [2.0, 300.0] {
+            let config = SensorConfig {
+                rgb_sigma,
+                ..Default::default()
+            };
+            let mut rgb = RgbImage::filled(16, 8, [0u8; 3]);
+            for (i, pixel) in rgb.as_mut_slice().iter_mut().enumerate() {
+                *pixel = [
+                    (i * 7 % 256) as u8,
+                    (i * 31 % 256) as u8,
+                    (255 - i % 256) as u8,
+                ];
+            }
+            let noisy = config.corrupt_rgb(&rgb, 9);
+            for (i, (before, after)) in rgb.as_slice().iter().zip(noisy.as_slice()).enumerate() {
+                let bits = derive_seed(9 ^ 0x0067_7262, i as u64);
+                for k in 0..3 {
+                    let p = (((bits >> (16 * k)) & 0xffff) as f64 + 0.5) / 65536.0;
+                    let offset = (rgb_sigma * standard_normal_quantile(p)).round();
+                    let expected = (f64::from(before[k]) + offset).clamp(0.0, 255.0) as u8;
+                    assert_eq!(after[k], expected, "σ {rgb_sigma}, pixel {i}, channel {k}");
+                }
+            }
+        }
+    }
+
     #[test]
     fn range_limits_and_edges_drop_pixels() {
         let config = SensorConfig {
