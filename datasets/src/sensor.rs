@@ -119,7 +119,7 @@ impl SensorConfig {
             return rgb.clone();
         }
         let offsets = rounded_normal_table(self.rgb_sigma);
-        let seed = seed ^ 0x0067_7262;
+        let seed = seed ^ RGB_NOISE_SALT;
         let mut out = rgb.as_slice().to_vec();
         out.par_chunks_mut(w).enumerate().for_each(|(v, row)| {
             for (u, pixel) in row.iter_mut().enumerate() {
@@ -134,6 +134,10 @@ impl SensorConfig {
         RgbImage::from_vec(rgb.width(), rgb.height(), out).expect("same size as input")
     }
 }
+
+/// Mixed into the frame's seed for the RGB noise (the bytes of "grb"), so that its draws are
+/// not the depth noise's.
+const RGB_NOISE_SALT: u64 = 0x0067_7262;
 
 /// The 16-bit threshold below which a uniform 16-bit draw happens with probability `p`.
 fn probability_threshold(p: f64) -> u32 {
@@ -327,7 +331,7 @@ mod tests {
             }
             let noisy = config.corrupt_rgb(&rgb, 9);
             for (i, (before, after)) in rgb.as_slice().iter().zip(noisy.as_slice()).enumerate() {
-                let bits = derive_seed(9 ^ 0x0067_7262, i as u64);
+                let bits = derive_seed(9 ^ RGB_NOISE_SALT, i as u64);
                 for k in 0..3 {
                     let p = (((bits >> (16 * k)) & 0xffff) as f64 + 0.5) / 65536.0;
                     let offset = (rgb_sigma * standard_normal_quantile(p)).round();

@@ -129,12 +129,12 @@ pub struct ScanConfig {
     /// and its height's doubt reaches down (and up) to that level. A level that high above the
     /// neck is taken as the plane instead: the neck then lies in the pedestal. Default 6, half
     /// the turn: a rock on another rock (the double rock) sits where the lower rock's top falls
-    /// away on one side. In the mission meshes of sessions 37–39 (206 targets), the plane-less scans that no
-    /// other rule refused were 8 double rocks, each with a half-turn level 1.2–4.3 cm below its
-    /// neck; read at the neck they were −0.2° to +2.5° off, 7 of 8 inside the interval (the
-    /// miss, +2.5°, does not come from the height). Every other plane-less scan was refused for
-    /// its base. At most [`ScanConfig::support_min_sectors`]; equal to it, a scan without a plane
-    /// is refused.
+    /// away on one side. In the mission meshes of sessions 37–39 (206 targets), the plane-less
+    /// scans that no other rule refused were 8 double rocks, each with a half-turn level
+    /// 1.2–4.3 cm below its neck; read at the neck they were −0.2° to +2.5° off, 7 of 8 inside
+    /// the interval (the miss, +2.5°, does not come from the height). Every other plane-less
+    /// scan was refused for its base. At most [`ScanConfig::support_min_sectors`]; equal to it,
+    /// a scan without a plane is refused.
     pub partial_support_min_sectors: usize,
     /// A closed rock whose patches over unseen parts (and the cut) exceed this fraction of its
     /// surface is refused: too much of its shape, and so of its centre of mass, is guessed.

@@ -780,7 +780,9 @@ pub fn finish_target(
     // after BA (5.4 s against 5.2 s a target on the small test world) and measured nearly the
     // same map.
     let started = Instant::now();
-    let mesh_before = world.map(|_| extract_mesh(session.tracker.volume(), &refine.meshing));
+    let mesh_before = world
+        .is_some()
+        .then(|| extract_mesh(session.tracker.volume(), &refine.meshing));
     let mesh_before_s = started.elapsed().as_secs_f64();
     let refined = refine_keyframes(&session.camera, &keyframes, &refine)?;
     tracing::info!(

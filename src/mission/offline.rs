@@ -299,7 +299,9 @@ pub fn process_flight(inputs: &ProcessInputs<'_>) -> MissionResult<MissionReport
                         RecenterStep::Move { cylinder, moved_m } => {
                             let rise_m = cylinder.z_bottom_m - old.z_bottom_m;
                             tracing::info!(
-                                "target {}: map cylinder moved {moved_m:.2} m across and {rise_m:+.2} m up to where frame {index} and the one before see it",
+                                "target {}: map cylinder moved {moved_m:.2} m across and \
+                                 {rise_m:+.2} m up to where frame {index} and the one before \
+                                 see it",
                                 session.target_id()
                             );
                             session.recenter(&cylinder, config)?;

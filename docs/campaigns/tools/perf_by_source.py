@@ -13,6 +13,7 @@ Usage:
 """
 import argparse
 import collections
+import pathlib
 import re
 import subprocess
 
@@ -47,7 +48,10 @@ def main():
     ap.add_argument("perf_data")
     ap.add_argument("binary")
     ap.add_argument("--top", type=int, default=40)
-    ap.add_argument("--tree", default="/work/main/", help="prefix of our sources in the debug info")
+    # The build records absolute source paths: by default, the checkout this script lives in.
+    here = pathlib.Path(__file__).resolve().parents[3]
+    ap.add_argument("--tree", default=f"{here}/",
+                    help="prefix of our sources in the debug info (default: this checkout)")
     args = ap.parse_args()
     runtime, offset = load_base(args.perf_data, args.binary)
     load_vaddr = vaddr_of_offset(args.binary, offset)

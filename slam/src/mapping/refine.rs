@@ -320,8 +320,7 @@ pub struct RefinedMap {
     /// The noise the last solve weighted with, when [`RefineConfig::estimate_noise`] estimated
     /// it.
     pub estimated_noise: Option<EstimatedNoise>,
-    /// Wall times, milliseconds: landmark tracking, bundle adjustment, re-integration, meshing,
-    /// and the fusion and meshing of `mesh_before` (0 without it).
+    /// Wall times, milliseconds: landmark tracking, bundle adjustment, re-integration, meshing.
     pub landmarks_ms: f64,
     /// See `landmarks_ms`.
     pub ba_ms: f64,
@@ -329,8 +328,6 @@ pub struct RefinedMap {
     pub reintegrate_ms: f64,
     /// See `landmarks_ms`.
     pub mesh_ms: f64,
-    /// See `landmarks_ms`.
-    pub mesh_before_ms: f64,
 }
 
 /// Runs landmarks → bundle adjustment → re-integration → mesh on a target's keyframes.
@@ -494,7 +491,6 @@ pub fn refine_keyframes(
             config.between_max_correction_change_deg.to_radians(),
         )
     };
-    let started = Instant::now();
     let mesh_before = if config.mesh_before {
         let volume = fuse_in_order(
             camera,
@@ -505,7 +501,6 @@ pub fn refine_keyframes(
     } else {
         None
     };
-    let mesh_before_ms = started.elapsed().as_secs_f64() * 1e3;
     let started = Instant::now();
     let tsdf_adjusted = TsdfConfig {
         roi: config
@@ -532,7 +527,6 @@ pub fn refine_keyframes(
         ba_ms,
         reintegrate_ms,
         mesh_ms,
-        mesh_before_ms,
     })
 }
 
