@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use clap::{Args, ValueEnum};
-use nalgebra::Isometry3;
+use nalgebra::{Isometry3, Point3};
 use scarp_datasets::sequence::Sequence;
 use scarp_datasets::world::{RockRole, World};
 use scarp_export::atomic::write_bytes_atomically;
@@ -213,14 +213,14 @@ fn ground_truth_detections(seq: &Sequence) -> Vec<(f64, Detection)> {
         .collect()
 }
 
-/// Ground-truth comparison of one target: the nearest rock within `radius_m`, the centroid
-/// error and the fraction of points within 0.5 m of its surface.
+/// Ground-truth comparison of one target located at `c` (its C_e): the nearest rock within
+/// `radius_m`, the centroid error and the fraction of points within 0.5 m of its surface.
 fn compare_with_world(
     target: &Target,
+    c: &Point3<f64>,
     world: &World,
     radius_m: f64,
 ) -> anyhow::Result<Option<(u32, &'static str, f64, f64)>> {
-    let c = target.center();
     let nearest = world
         .rocks
         .iter()
@@ -359,7 +359,7 @@ pub fn localize(args: &LocalizeArgs) -> anyhow::Result<LocalizeSummary> {
             tentative += 1;
             continue;
         }
-        let c = target.center();
+        let c = target.located_center(catalog.config().center_from_depth_views);
         let mut summary = TargetSummary {
             id: target.id(),
             status: target.status(),
@@ -378,7 +378,7 @@ pub fn localize(args: &LocalizeArgs) -> anyhow::Result<LocalizeSummary> {
             fraction_on_surface: None,
         };
         if let Some(world) = &world {
-            match compare_with_world(target, world, args.match_radius_m)? {
+            match compare_with_world(target, &c, world, args.match_radius_m)? {
                 Some((rock, role, error_m, fraction)) => {
                     summary.localization_error_estimate_frame_m = pose_error_by_target
                         .mean_m(target.id())

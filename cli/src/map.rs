@@ -311,7 +311,9 @@ fn refine(
             min_observations: args.min_observations,
             min_component_triangles: args.min_component_triangles,
         },
-        mesh_before: true,
+        // Only the world's F-score reads it: without a world it would fuse every keyframe
+        // twice for nothing.
+        mesh_before: args.world.is_some(),
         ..base
     };
     let refined =

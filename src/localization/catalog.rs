@@ -12,6 +12,7 @@ use super::cone::BoxCone;
 use super::free_space::FreeSpace;
 use super::keyframe::is_keyframe;
 use super::points::generate_points;
+use super::silhouette::center_in_box;
 use super::target::{Target, TargetStatus};
 use super::update::{BoxLikelihood, low_variance_resample, update_points};
 use super::{LocalizationConfig, LocalizationError, check_box, check_pose};
@@ -37,6 +38,23 @@ pub struct ObserveReport {
     /// `(kept, absorbed)` pairs of converged targets merged for being closer than the merge
     /// distance.
     pub merged: Vec<(u32, u32)>,
+}
+
+/// Records on `target` the object centre that `depth_m` (when given) shows inside `bbox`, seen
+/// from `world_from_camera`: the depth's evidence of where the rock stands
+/// ([`super::silhouette::center_in_box`]).
+fn record_seen_center(
+    target: &mut Target,
+    camera: &PinholeCamera,
+    world_from_camera: &Isometry3<f64>,
+    bbox: &BoundingBox,
+    depth_m: Option<&DepthImage>,
+) {
+    if let Some(center) =
+        depth_m.and_then(|depth| center_in_box(camera, depth, world_from_camera, bbox))
+    {
+        target.record_seen_center(center.xy());
+    }
 }
 
 /// All targets of a flight, in order of registration.
@@ -212,6 +230,7 @@ impl TargetCatalog {
                 rng,
             )
         };
+        let depth_for_center = depth_m.filter(|_| cfg.center_from_depth_views > 0);
         // Updates and registrations, in box order.
         let mut new_targets = Vec::new();
         for (bi, (track_id, bbox)) in boxes.iter().enumerate() {
@@ -224,6 +243,7 @@ impl TargetCatalog {
                     report.matched.push(t.id);
                     if t.restart_pending {
                         t.restart(fresh_points(bi, rng), *world_from_camera)?;
+                        record_seen_center(t, camera, world_from_camera, bbox, depth_for_center);
                         report.restarted.push(t.id);
                         report.updated.push(t.id);
                     } else if is_keyframe(
@@ -255,6 +275,13 @@ impl TargetCatalog {
                         ) {
                             Some(points) => {
                                 t.apply_update(points, *world_from_camera, &cfg)?;
+                                record_seen_center(
+                                    t,
+                                    camera,
+                                    world_from_camera,
+                                    bbox,
+                                    depth_for_center,
+                                );
                                 report.updated.push(t.id);
                             }
                             None => report.unsupported.push(t.id),
@@ -265,12 +292,15 @@ impl TargetCatalog {
                     let points = fresh_points(bi, rng);
                     let id = self.next_id;
                     self.next_id += 1;
-                    new_targets.push(Target::new(
-                        id,
-                        points,
-                        *world_from_camera,
-                        Some(*track_id),
-                    )?);
+                    let mut target = Target::new(id, points, *world_from_camera, Some(*track_id))?;
+                    record_seen_center(
+                        &mut target,
+                        camera,
+                        world_from_camera,
+                        bbox,
+                        depth_for_center,
+                    );
+                    new_targets.push(target);
                     report.registered.push(id);
                 }
             }
@@ -476,6 +506,53 @@ mod tests {
             .unwrap_err();
         assert!(err.to_string().contains("80×60"), "{err}");
         assert!(catalog.targets().is_empty());
+    }
+
+    /// From the 24° arc whose box cones meet in a sliver metres long, the object centres that the
+    /// depth inside each keyframe box gives put C_e on the sphere horizontally, where the points'
+    /// mean is off along the line of sight; with fewer seen centres than configured (or the
+    /// option off), C_e is the points' mean; a restart forgets the seen centres.
+    #[test]
+    fn the_depth_inside_the_boxes_places_the_centre_across_the_view() {
+        let (cam, rock, radius) = sphere_scene();
+        let n = 60;
+        let run = |center_from_depth_views: usize, views: usize| {
+            let config = LocalizationConfig {
+                center_from_depth_views,
+                ..Default::default()
+            };
+            let mut catalog = TargetCatalog::new(config).unwrap();
+            let mut rng = Xoshiro256PlusPlus::seed_from_u64(5);
+            for k in 0..views {
+                let pose = circle_pose(&rock, (k + n - views / 2) % n, n);
+                observe_sphere(&mut catalog, &cam, &pose, &rock, radius, &mut rng);
+            }
+            catalog
+        };
+        let horizontal_m = |c: Point3<f64>| (c.xy() - rock.xy()).norm();
+        let catalog = run(3, 5);
+        let t = &catalog.targets()[0];
+        assert!(t.seen_centers() >= 3, "{} seen centres", t.seen_centers());
+        let (located_m, mean_m) = (horizontal_m(t.located_center(3)), horizontal_m(t.center()));
+        assert!(
+            located_m < 0.1 && located_m < 0.5 * mean_m,
+            "located {located_m} m off horizontally, the points' mean {mean_m} m"
+        );
+        // Its height stays the points'.
+        assert_eq!(t.located_center(3).z, t.center().z);
+        // Too few seen centres, or the option off: the points' mean.
+        assert_eq!(t.located_center(t.seen_centers() + 1), t.center());
+        assert_eq!(t.located_center(0), t.center());
+        let off = run(0, 5);
+        assert_eq!(off.targets()[0].seen_centers(), 0);
+        // A restart starts the seen centres afresh with its own box.
+        let mut catalog = catalog;
+        let id = catalog.targets()[0].id();
+        assert!(catalog.restart_on_next_box(id));
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(6);
+        let pose = circle_pose(&rock, 0, n);
+        observe_sphere(&mut catalog, &cam, &pose, &rock, radius, &mut rng);
+        assert_eq!(catalog.targets()[0].seen_centers(), 1);
     }
 
     /// A rock on the ground first boxed 17 m away from 12 m up, as the search first sees

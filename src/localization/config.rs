@@ -103,6 +103,18 @@ pub struct LocalizationConfig {
     /// four inward half-spaces (N·L > 0); otherwise it registers a new target. Default 1 (the
     /// paper: "any point").
     pub min_points_in_cone: usize,
+    /// C_e's horizontal position is the median of the object centres that the depth inside the
+    /// target's keyframe boxes gives ([`super::silhouette::center_in_box`]) once this many
+    /// keyframes gave one; until then, and with 0, it is the mean of the points (the paper's).
+    /// Its height is always the points' mean. Default 3.
+    ///
+    /// Why: the points' mean is where the box cones intersect, blurred by the noise and by how
+    /// the boxes frame the rock; the depth inside one box already places the rock across the
+    /// view. Rendered from 25 views around the fine-localization circle (10 m up, 55° down,
+    /// with the sensor's depth noise), the median of those centres came within 0.15 m of the
+    /// centroid on all 11 targets of three worlds; the points' mean was 0.27 m off (median)
+    /// and up to 0.84 m horizontally over a 55-target campaign (session 45).
+    pub center_from_depth_views: usize,
 }
 
 impl Default for LocalizationConfig {
@@ -130,6 +142,7 @@ impl Default for LocalizationConfig {
             confirm_hits: 5,
             max_misses: 3,
             min_points_in_cone: 1,
+            center_from_depth_views: 3,
         }
     }
 }

@@ -29,7 +29,7 @@ const FLOOR_QUANTILE: f64 = 0.05;
 
 /// Height above the floor within which a measured surface counts as ground, m. The same band
 /// tells the object from the ground when the map's centre is taken from a box
-/// (`mission::perception::center_in_box`).
+/// ([`super::silhouette::center_in_box`]).
 pub const GROUND_BAND_M: f64 = 0.25;
 
 /// Pixel step of the grid of depth samples for the floor.

@@ -44,6 +44,7 @@ pub mod free_space;
 pub mod gaussian;
 pub mod keyframe;
 pub mod points;
+pub mod silhouette;
 pub mod target;
 #[cfg(test)]
 pub(crate) mod test_scenes;

@@ -1,6 +1,6 @@
 //! One target: its point set, Gaussian fit, counters and status.
 
-use nalgebra::{Isometry3, Point3};
+use nalgebra::{Isometry3, Point2, Point3};
 use serde::{Deserialize, Serialize};
 
 use super::LocalizationConfig;
@@ -49,6 +49,9 @@ pub struct Target {
     /// Set by [`super::TargetCatalog::restart_on_next_box`]: the next box paired with this
     /// target starts its points afresh.
     pub(crate) restart_pending: bool,
+    /// The object's horizontal centre that the depth inside each keyframe box gave (world xy,
+    /// m), since registration or the last restart.
+    pub(crate) seen_centers_xy: Vec<Point2<f64>>,
 }
 
 impl Target {
@@ -78,6 +81,7 @@ impl Target {
             last_track_id: track_id,
             view_positions: vec![Point3::from(world_from_camera.translation.vector)],
             restart_pending: false,
+            seen_centers_xy: Vec::new(),
         })
     }
 
@@ -192,9 +196,37 @@ impl Target {
         &self.gaussian
     }
 
-    /// Mean of the points (C_e), world frame, m.
+    /// Mean of the points, world frame, m: the paper's C_e, which the filter's own tests (the
+    /// view span, misses in view) use.
     pub fn center(&self) -> Point3<f64> {
         self.gaussian.mean
+    }
+
+    /// Records the object's horizontal centre (world xy, m) that the depth inside this
+    /// keyframe's box gave.
+    pub fn record_seen_center(&mut self, center_xy: Point2<f64>) {
+        self.seen_centers_xy.push(center_xy);
+    }
+
+    /// How many keyframes gave an object centre from their depth.
+    pub fn seen_centers(&self) -> usize {
+        self.seen_centers_xy.len()
+    }
+
+    /// C_e as the mission reports and plans with it, world frame, m: horizontally the median
+    /// (per axis) of the seen centres once there are at least `min_views` of them (and
+    /// `min_views` > 0), else the points' mean; vertically the points' mean. See
+    /// [`LocalizationConfig::center_from_depth_views`].
+    pub fn located_center(&self, min_views: usize) -> Point3<f64> {
+        let mean = self.center();
+        if min_views == 0 || self.seen_centers_xy.len() < min_views {
+            return mean;
+        }
+        let median = |axis: fn(&Point2<f64>) -> f64, fallback: f64| {
+            let mut values: Vec<f64> = self.seen_centers_xy.iter().map(axis).collect();
+            scarp_slam::stats::quantile_in_place(&mut values, 0.5).unwrap_or(fallback)
+        };
+        Point3::new(median(|p| p.x, mean.x), median(|p| p.y, mean.y), mean.z)
     }
 
     /// Covariance of the points, m².

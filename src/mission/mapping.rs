@@ -31,7 +31,7 @@ use super::catalog::TargetStatus;
 use super::config::{CylinderEstimateConfig, MissionConfig};
 use super::coverage::CylinderCoverage;
 use super::evaluation::nearest_rock;
-use super::perception::{Perception, center_in_box};
+use super::perception::Perception;
 use super::report::{StageTimings, TargetReport};
 use crate::evaluation::mesh::{MeshEvalConfig, MeshEvaluation, Visibility, evaluate_mesh_at_taus};
 use crate::evaluation::trajectory::{
@@ -39,6 +39,7 @@ use crate::evaluation::trajectory::{
 };
 use crate::fragility::scan::{analyze_closed_scan, close_scan, scan_centroid};
 use crate::fragility::{ContactSpec, analyze};
+use crate::localization::silhouette::center_in_box;
 
 /// A frame kept for bundle adjustment and re-integration.
 #[derive(Debug, Clone)]
@@ -1109,7 +1110,7 @@ mod tests {
     /// was limited to the box's size around its central depth, it came out up to 7.7 m off.
     #[test]
     fn the_centre_seen_from_low_is_the_rocks() {
-        use crate::mission::perception::{center_in_box, center_of_silhouette, points_in_box};
+        use crate::localization::silhouette::{center_in_box, center_of_silhouette, points_in_box};
         use scarp_datasets::world::RockRole;
         let camera = PinholeCamera::from_hfov(640, 480, 87.0).unwrap();
         let mut worst_m: f64 = 0.0;

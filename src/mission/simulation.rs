@@ -730,7 +730,13 @@ impl<'a> Mission<'a> {
         center: &Point3<f64>,
     ) -> MissionResult<VerticalCylinder> {
         let c = &self.inputs.config.cylinder;
-        let radius = cylinder_radius_m(points, center, c);
+        // The radius measures the points' own spread, about their mean: C_e's horizontal
+        // position may come from the depth instead (`center_from_depth_views`).
+        let points_mean = points
+            .iter()
+            .fold(Vector3::zeros(), |sum, p| sum + p.coords)
+            / points.len().max(1) as f64;
+        let radius = cylinder_radius_m(points, &points_mean.into(), c);
         let ground = self
             .last_depth
             .as_ref()
