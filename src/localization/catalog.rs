@@ -434,6 +434,19 @@ mod tests {
             .unwrap();
     }
 
+    /// A catalog with `config` after the sphere scene is boxed, with depth, from `views`
+    /// consecutive views of the `n`-view circle ([`circle_pose`]) centred on view 0 (seed 5).
+    fn sphere_seen_from_arc(config: LocalizationConfig, views: usize, n: usize) -> TargetCatalog {
+        let (cam, rock, radius) = sphere_scene();
+        let mut catalog = TargetCatalog::new(config).unwrap();
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(5);
+        for k in 0..views {
+            let pose = circle_pose(&rock, (k + n - views / 2) % n, n);
+            observe_sphere(&mut catalog, &cam, &pose, &rock, radius, &mut rng);
+        }
+        catalog
+    }
+
     #[test]
     fn circle_of_views_localizes_and_converges() {
         let cam = camera();
@@ -472,12 +485,7 @@ mod tests {
                 free_space_margin_per_m: 0.0,
                 ..Default::default()
             };
-            let mut catalog = TargetCatalog::new(config).unwrap();
-            let mut rng = Xoshiro256PlusPlus::seed_from_u64(5);
-            for k in 0..views {
-                let pose = circle_pose(&rock, (k + n - views / 2) % n, n);
-                observe_sphere(&mut catalog, &cam, &pose, &rock, radius, &mut rng);
-            }
+            let catalog = sphere_seen_from_arc(config, views, n);
             let t = &catalog.targets()[0];
             ((t.center() - rock).norm(), t.covariance()[(0, 0)].sqrt())
         };
@@ -521,13 +529,7 @@ mod tests {
                 center_from_depth_views,
                 ..Default::default()
             };
-            let mut catalog = TargetCatalog::new(config).unwrap();
-            let mut rng = Xoshiro256PlusPlus::seed_from_u64(5);
-            for k in 0..views {
-                let pose = circle_pose(&rock, (k + n - views / 2) % n, n);
-                observe_sphere(&mut catalog, &cam, &pose, &rock, radius, &mut rng);
-            }
-            catalog
+            sphere_seen_from_arc(config, views, n)
         };
         let horizontal_m = |c: Point3<f64>| (c.xy() - rock.xy()).norm();
         let catalog = run(3, 5);
