@@ -406,7 +406,7 @@ fn target_cylinder(
 ) -> MissionResult<scarp_planning::prelude::VerticalCylinder> {
     let c = &config.cylinder;
     let state = &plan.state;
-    let radius = cylinder_radius_m(&state.points, &state.center, c);
+    let radius = cylinder_radius_m(&state.points, &state.points_center, c);
     let ground = match plan.ground_frame {
         Some(index) => {
             let frame = flight.images_at(index)?;

@@ -39,6 +39,9 @@ pub struct TargetState {
     pub center: Point3<f64>,
     /// Its point set, world ENU metres.
     pub points: Vec<Point3<f64>>,
+    /// The mean of `points`, world ENU metres (the paper's C_e): what the points' spread, and
+    /// so the mapping cylinder's radius, is measured about.
+    pub points_center: Point3<f64>,
     /// h_p fell below the fine-localization threshold.
     pub ready_for_fine_localization: bool,
     /// KL stayed below the threshold long enough.
@@ -268,6 +271,7 @@ impl Perception {
             id: target.id(),
             center: target.located_center(self.catalog.config().center_from_depth_views),
             points: target.points().to_vec(),
+            points_center: target.center(),
             ready_for_fine_localization: target.status() != FilterStatus::Tracking,
             converged: target.status() == FilterStatus::Converged,
             covariance_xy: [c[(0, 0)], c[(0, 1)], c[(1, 1)]],

@@ -29,7 +29,7 @@ use super::monitor::{SafetyMonitor, Senses, nearest_depth_m};
 use super::motion::MotionSystem;
 use super::mount::CameraMount;
 use super::navigation::{MapFrameOffset, RingDrift};
-use super::perception::Perception;
+use super::perception::{Perception, TargetState};
 use super::record::{FlightOrigin, FlightRecorder};
 use super::report::{MissionReport, ModeChange, StageTimings};
 use super::safety::SafetyLog;
@@ -721,22 +721,14 @@ impl<'a> Mission<'a> {
         Ok(())
     }
 
-    /// The mapping cylinder from the converged point set (paper §III, mapping), standing on
+    /// The mapping cylinder from the converged point set (paper §III, mapping): around C_e,
+    /// as wide as the points' spread about their own mean, standing on
     /// the ground in the frame the vehicle flies in (the GPS error shifts everything, the DEM
     /// does not know it): measured by the depth camera around the target, else the DEM.
-    fn target_cylinder(
-        &self,
-        points: &[Point3<f64>],
-        center: &Point3<f64>,
-    ) -> MissionResult<VerticalCylinder> {
+    fn target_cylinder(&self, state: &TargetState) -> MissionResult<VerticalCylinder> {
         let c = &self.inputs.config.cylinder;
-        // The radius measures the points' own spread, about their mean: C_e's horizontal
-        // position may come from the depth instead (`center_from_depth_views`).
-        let points_mean = points
-            .iter()
-            .fold(Vector3::zeros(), |sum, p| sum + p.coords)
-            / points.len().max(1) as f64;
-        let radius = cylinder_radius_m(points, &points_mean.into(), c);
+        let center = &state.center;
+        let radius = cylinder_radius_m(&state.points, &state.points_center, c);
         let ground = self
             .last_depth
             .as_ref()
@@ -851,7 +843,7 @@ impl<'a> Mission<'a> {
             return self.resume_search(timings);
         }
         let clock = Instant::now();
-        let cylinder = self.target_cylinder(&state.points, &state.center)?;
+        let cylinder = self.target_cylinder(&state)?;
         let result = self.fly_rings_around(&cylinder);
         timings.planning_s += clock.elapsed().as_secs_f64();
         if let Some(m) = self.targets.get_mut(&id) {
