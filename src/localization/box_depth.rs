@@ -1,11 +1,26 @@
 //! Depth measured over a detection box: grid samples of the frame's depth image, and from them
 //! the depths along camera z at which the boxed target can lie.
 
+use std::ops::RangeInclusive;
+
 use scarp_slam::PinholeCamera;
 use scarp_slam::image::DepthImage;
 use scarp_slam::stats::quantile_in_place;
 
 use crate::detection::BoundingBox;
+
+/// The pixel columns and rows of `bbox` (px, rounded) clamped to `depth_m`'s image, both
+/// inclusive; on an image with no pixels, the ranges hold pixel 0, which reads nothing.
+pub fn pixel_ranges_in_box(
+    depth_m: &DepthImage,
+    bbox: &BoundingBox,
+) -> (RangeInclusive<u32>, RangeInclusive<u32>) {
+    let clamp = |v: f64, n: u32| v.round().clamp(0.0, f64::from(n.max(1)) - 1.0) as u32;
+    (
+        clamp(bbox.x_min, depth_m.width())..=clamp(bbox.x_max, depth_m.width()),
+        clamp(bbox.y_min, depth_m.height())..=clamp(bbox.y_max, depth_m.height()),
+    )
+}
 
 /// The measured depths (metres along camera z) on a `grid` × `grid` lattice spanning the
 /// central `fraction` of `bbox` (1 = the whole box, 0.5 = its central half), row by row,

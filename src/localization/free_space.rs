@@ -21,6 +21,7 @@ use scarp_slam::PinholeCamera;
 use scarp_slam::image::DepthImage;
 
 use super::LocalizationConfig;
+use super::box_depth::pixel_ranges_in_box;
 use crate::detection::BoundingBox;
 
 /// The quantile of the heights of a box's depth points taken as the ground at the rock's foot:
@@ -158,19 +159,11 @@ pub fn floors_z_m(
     bbox: &BoundingBox,
     enlarged: &BoundingBox,
 ) -> (Option<f64>, Option<f64>) {
-    let clamp = |v: f64, n: u32| v.round().clamp(0.0, f64::from(n.max(1)) - 1.0) as u32;
-    let (u0, u1) = (
-        clamp(enlarged.x_min, depth_m.width()),
-        clamp(enlarged.x_max, depth_m.width()),
-    );
-    let (v0, v1) = (
-        clamp(enlarged.y_min, depth_m.height()),
-        clamp(enlarged.y_max, depth_m.height()),
-    );
+    let (columns, rows) = pixel_ranges_in_box(depth_m, enlarged);
     // (height, whether the sample lies inside the tracked box)
     let mut samples = Vec::new();
-    for v in (v0..=v1).step_by(FLOOR_STEP_PX) {
-        for u in (u0..=u1).step_by(FLOOR_STEP_PX) {
+    for v in rows.step_by(FLOOR_STEP_PX) {
+        for u in columns.clone().step_by(FLOOR_STEP_PX) {
             if let Some(&d) = depth_m.get(u, v)
                 && d > 0.0
                 && d.is_finite()

@@ -9,16 +9,12 @@ use nalgebra::{Isometry3, Point2, Point3};
 use scarp_slam::PinholeCamera;
 use scarp_slam::image::DepthImage;
 
-use super::box_depth::depth_samples_in_box;
+use super::box_depth::{depth_samples_in_box, pixel_ranges_in_box};
 use crate::detection::BoundingBox;
 
-/// Median measured depth over the central half of a box (sampled on a grid), metres; `None`
-/// when no pixel there has a measurement.
-///
-/// Boxes whose rock lies beyond the depth filter's range are held back: Algorithm 2 draws
-/// depths in [3, 18] m, so a rock first seen at 25 m would seed a point set that cannot reach
-/// it, and the filter would converge in mid-air. The rock comes into range as the search goes
-/// on.
+/// Median measured depth over the central half of a box (sampled on a grid), metres along
+/// camera z: the depth of the object the box frames. `None` when no pixel there has a
+/// measurement.
 pub fn median_depth_in_box(depth_m: &DepthImage, bbox: &BoundingBox) -> Option<f64> {
     let mut samples = depth_samples_in_box(depth_m, bbox, 0.5, 9);
     scarp_slam::stats::quantile_in_place(&mut samples, 0.5)
@@ -98,28 +94,21 @@ pub fn center_in_box(
     center_of_silhouette(&world_from_camera.translation.vector.into(), &object)
 }
 
-/// The depth points of the pixels inside `bbox` (clamped to the image), in the frame of
-/// `world_from_camera`, row by row.
+/// The depth points of the pixels inside `bbox` (clamped to the image; pixels without a finite,
+/// positive depth give none), in the frame of `world_from_camera`, row by row.
 pub fn points_in_box(
     camera: &PinholeCamera,
     depth_m: &DepthImage,
     world_from_camera: &Isometry3<f64>,
     bbox: &BoundingBox,
 ) -> Vec<Point3<f64>> {
-    let clamp = |v: f64, n: u32| v.round().clamp(0.0, f64::from(n) - 1.0) as u32;
-    let (u0, u1) = (
-        clamp(bbox.x_min, depth_m.width()),
-        clamp(bbox.x_max, depth_m.width()),
-    );
-    let (v0, v1) = (
-        clamp(bbox.y_min, depth_m.height()),
-        clamp(bbox.y_max, depth_m.height()),
-    );
+    let (columns, rows) = pixel_ranges_in_box(depth_m, bbox);
     let mut points = Vec::new();
-    for v in v0..=v1 {
-        for u in u0..=u1 {
+    for v in rows {
+        for u in columns.clone() {
             if let Some(&d) = depth_m.get(u, v)
                 && d > 0.0
+                && d.is_finite()
             {
                 let p = camera.unproject(&Point2::new(f64::from(u), f64::from(v)), f64::from(d));
                 points.push(world_from_camera * p);
@@ -211,5 +200,29 @@ mod tests {
         assert_eq!(median_depth_in_box(&depth, &inside), Some(12.0));
         let empty = BoundingBox::new(0.0, 0.0, 20.0, 15.0).unwrap();
         assert_eq!(median_depth_in_box(&depth, &empty), None);
+    }
+
+    /// Pixels without a finite, positive depth give no point; a box reaching past the image is
+    /// clamped to it.
+    #[test]
+    fn points_in_box_skip_bad_depth_and_stay_in_the_image() {
+        let camera = PinholeCamera::from_hfov(8, 6, 80.0).unwrap();
+        let mut depth = DepthImage::filled(8, 6, 2.0);
+        for (u, v, d) in [
+            (0, 0, f32::INFINITY),
+            (1, 0, f32::NAN),
+            (2, 0, -1.0),
+            (3, 0, 0.0),
+        ] {
+            *depth.get_mut(u, v).unwrap() = d;
+        }
+        let whole = BoundingBox::new(-5.0, -5.0, 50.0, 50.0).unwrap();
+        let points = points_in_box(&camera, &depth, &Isometry3::identity(), &whole);
+        assert_eq!(points.len(), 8 * 6 - 4);
+        assert!(
+            points
+                .iter()
+                .all(|p| p.coords.iter().all(|c| c.is_finite()))
+        );
     }
 }

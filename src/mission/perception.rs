@@ -343,6 +343,10 @@ fn detections_as_tracks(detections: &[Detection], frame: u64) -> Vec<(u64, Bound
 /// The boxes that reach the depth filter: inside the image, with a valid shape, and whose rock
 /// lies within the filter's range (`max_depth_m`, by the median depth of the box's centre; see
 /// [`median_depth_in_box`]).
+///
+/// Boxes whose rock lies beyond that range are held back: Algorithm 2 draws depths in
+/// [3, 18] m, so a rock first seen at 25 m would seed a point set that cannot reach it, and the
+/// filter would converge in mid-air. The rock comes into range as the search goes on.
 pub fn boxes_for_filter(
     candidates: &[(u64, BoundingBox)],
     frame: &RgbdFrame,
