@@ -234,6 +234,9 @@ impl TargetCatalog {
         // Updates and registrations, in box order.
         let mut new_targets = Vec::new();
         for (bi, (track_id, bbox)) in boxes.iter().enumerate() {
+            let see_center = |t: &mut Target| {
+                record_seen_center(t, camera, world_from_camera, bbox, depth_for_center);
+            };
             match box_target[bi] {
                 Some(ti) => {
                     let t = &mut self.targets[ti];
@@ -243,7 +246,7 @@ impl TargetCatalog {
                     report.matched.push(t.id);
                     if t.restart_pending {
                         t.restart(fresh_points(bi, rng), *world_from_camera)?;
-                        record_seen_center(t, camera, world_from_camera, bbox, depth_for_center);
+                        see_center(t);
                         report.restarted.push(t.id);
                         report.updated.push(t.id);
                     } else if is_keyframe(
@@ -275,13 +278,7 @@ impl TargetCatalog {
                         ) {
                             Some(points) => {
                                 t.apply_update(points, *world_from_camera, &cfg)?;
-                                record_seen_center(
-                                    t,
-                                    camera,
-                                    world_from_camera,
-                                    bbox,
-                                    depth_for_center,
-                                );
+                                see_center(t);
                                 report.updated.push(t.id);
                             }
                             None => report.unsupported.push(t.id),
@@ -293,13 +290,7 @@ impl TargetCatalog {
                     let id = self.next_id;
                     self.next_id += 1;
                     let mut target = Target::new(id, points, *world_from_camera, Some(*track_id))?;
-                    record_seen_center(
-                        &mut target,
-                        camera,
-                        world_from_camera,
-                        bbox,
-                        depth_for_center,
-                    );
+                    see_center(&mut target);
                     new_targets.push(target);
                     report.registered.push(id);
                 }
