@@ -42,7 +42,7 @@
 //!    edge), so it is never above the smallest sampled α.
 //! 6. A 95% interval, `alpha_min_low_deg` to `alpha_min_high_deg` ([`AlphaInterval`]): for a
 //!    closed rock, the perturbation study's range; for a scan ([`scan::analyze_scan`]), the span
-//!    of the readings of the extrapolated contact (36, and as many again where the support's
+//!    of the readings of the extrapolated contact (54, and as many again where the support's
 //!    edge was not seen all round; each also shrunk by two voxels), widened by the perturbation
 //!    spread and by margins set on three campaigns' flights.
 //!

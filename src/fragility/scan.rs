@@ -736,19 +736,34 @@ pub enum ProfileModel {
     SquaredRadius,
     /// r linear in height: exact for a conical base.
     Radius,
+    /// Per sector, whichever of the two lines fits the sector's slabs better (the smaller
+    /// squared radius residuals).
+    BestFit,
 }
 
 /// The profile model of a scan's α_min: it is the median of this model's readings
-/// ([`analyze_closed_scan`]); the other model's readings only widen the interval.
+/// ([`analyze_closed_scan`]); the other models' readings only widen the interval.
 ///
-/// Why r linear: over 416 analyses of mission meshes of the three worlds' 10 targets (269
-/// distinct scans, 23 campaigns of sessions 25–29; session 30's campaign document), the readings
-/// of r² linear fell within 2° of the truth on 66–76% (median error −0.2° to −0.5°, and down to
-/// −2.5° on the rounded boulders, whose bases steepen to a wall in their last centimetres),
-/// those of r linear on 88–92%, with 4 overestimates above 3° in either model (5 and 8 in the
-/// two r readings that skip the lowest slab over 4 and 6). On a campaign flown afterwards (45
-/// targets, 35 analysed, one world of four new rocks): 69–77% against 86–91%.
-pub const MEDIAN_MODEL: ProfileModel = ProfileModel::Radius;
+/// Why the better fit per sector: a base cut flat through a rounded underside (a boulder, a
+/// worn block) widens as √z above its contact, which r² linear follows and r linear
+/// overshoots at the plane; a neck narrowing to its contact is nearer a cone. Session 30 chose
+/// r linear for every sector (within 2° on 88–92% of 416 mission analyses of the three worlds'
+/// targets, r² linear on 66–76%). Session 47 read each sector with whichever line fits its
+/// slabs better:
+/// - 152 mission meshes of four campaigns (three worlds, seeds 60–64): mean |error| 0.82° →
+///   0.75°, median error +0.42° → +0.21°, within 2° 140 → 139, truth inside 144 → 144;
+/// - 59 rocks of random shape (`docs/campaigns/tools/fresh_shapes.py`, seeds 1–4), their
+///   exact surfaces: overestimates above 3° 13 → 8, mean |error| 2.15° → 1.87°; the same rocks
+///   scanned through the TSDF: 12 → 9, 2.41° → 2.22°;
+/// - the three worlds' 11 targets' exact surfaces: default rock 2 +1.12° → +0.17°.
+pub const MEDIAN_MODEL: ProfileModel = ProfileModel::BestFit;
+
+/// The models of the readings, in the ensemble's order.
+const ENSEMBLE_MODELS: [ProfileModel; 3] = [
+    ProfileModel::SquaredRadius,
+    ProfileModel::Radius,
+    ProfileModel::BestFit,
+];
 
 /// One way of reading the contact from the basal profile: the model, the slabs fitted and the
 /// support plane's offset from where it was measured.
@@ -778,7 +793,7 @@ impl ContactHypothesis {
         gaps: OutlineGaps::Interpolated,
     };
 
-    /// The readings the α_min interval spans: both models, fits from the lowest slab or one
+    /// The readings the α_min interval spans: the three models, fits from the lowest slab or one
     /// above it over 3, 4 or 6 slabs, and the plane at its measured height and
     /// ±`plane_offset_m` from it, with the support outline's unseen sectors interpolated; and,
     /// when `open_gaps`, each of those again with the unseen sectors unbounded.
@@ -790,7 +805,7 @@ impl ContactHypothesis {
             &[OutlineGaps::Interpolated]
         };
         for &gaps in gap_readings {
-            for model in [ProfileModel::SquaredRadius, ProfileModel::Radius] {
+            for model in ENSEMBLE_MODELS {
                 for skip_slabs in [0, 1] {
                     for fit_slabs in [3, 4, 6] {
                         for offset in [-plane_offset_m, 0.0, plane_offset_m] {
@@ -969,35 +984,17 @@ impl BasalProfile {
             if window.len() < 3 {
                 continue;
             }
-            let measured: Vec<(f64, f64)> = window
-                .iter()
-                .map(|&(top, r, _)| match hypothesis.model {
-                    ProfileModel::SquaredRadius => (top, r.powi(2)),
-                    ProfileModel::Radius => (top, r),
-                })
-                .collect();
-            // The narrowest slab of the window caps the contact: a lowest slab wider than
-            // those above it is the TSDF filling the wedge's tip (the double rock's lowest
-            // slab read 0.48 m where the rock is 0.21 m across), or a flaring foot, which the
-            // cap underestimates (the safe side).
-            let (narrowest, azimuth) = window
-                .iter()
-                .zip(&measured)
-                .map(|(&(_, _, azimuth), &(_, value))| (value, azimuth))
-                .fold(
-                    (f64::INFINITY, 0.0),
-                    |best, m| if m.0 < best.0 { m } else { best },
-                );
-            let at_plane = match line_fit(&measured) {
-                Some((a, b)) if b > 0.0 => {
-                    (a + b * hypothesis.plane_offset_m).clamp(0.0, narrowest)
-                }
-                _ => narrowest,
+            let model = match hypothesis.model {
+                ProfileModel::BestFit => best_fitting_model(&window),
+                model => model,
             };
-            let r0 = match hypothesis.model {
-                ProfileModel::SquaredRadius => at_plane.sqrt(),
-                ProfileModel::Radius => at_plane,
+            let Some(r0) = radius_at_plane(&window, model, hypothesis.plane_offset_m) else {
+                continue;
             };
+            let azimuth = window
+                .iter()
+                .min_by(|a, b| a.1.total_cmp(&b.1))
+                .map_or(0.0, |w| w.2);
             // Along the azimuth the slab reached its radius, not the sector's middle: a 10°
             // sector's middle moves the far end of an elongated base sideways by up to 9% of
             // its radius (5 cm on a slab standing on edge, 0.6 m long, whose α_min is across
@@ -1012,6 +1009,62 @@ impl BasalProfile {
             )));
         }
         Ok(hull)
+    }
+}
+
+/// The value a model fits to a slab's radius `r`: r² or r.
+fn model_value(model: ProfileModel, r: f64) -> f64 {
+    match model {
+        ProfileModel::SquaredRadius => r * r,
+        _ => r,
+    }
+}
+
+/// The radius a model's fitted value `v` stands for.
+fn model_radius(model: ProfileModel, v: f64) -> f64 {
+    match model {
+        ProfileModel::SquaredRadius => v.max(0.0).sqrt(),
+        _ => v,
+    }
+}
+
+/// The radius, metres, that `model` fitted to `window` ((slab top, radius, azimuth)) gives at
+/// `offset_m` above the plane, capped by the narrowest slab of the window: a lowest slab wider
+/// than those above it is the TSDF filling the wedge's tip (the double rock's lowest slab read
+/// 0.48 m where the rock is 0.21 m across), or a flaring foot, which the cap underestimates
+/// (the safe side). `None` for an empty window.
+fn radius_at_plane(window: &[(f64, f64, f64)], model: ProfileModel, offset_m: f64) -> Option<f64> {
+    let narrowest = window.iter().map(|w| w.1).reduce(f64::min)?;
+    let measured: Vec<(f64, f64)> = window
+        .iter()
+        .map(|&(top, r, _)| (top, model_value(model, r)))
+        .collect();
+    Some(match line_fit(&measured) {
+        Some((a, b)) if b > 0.0 => model_radius(model, a + b * offset_m).clamp(0.0, narrowest),
+        _ => narrowest,
+    })
+}
+
+/// The model whose line fits `window`'s radii ((slab top, radius, azimuth)) with the smaller
+/// sum of squared residuals, in metres of radius ([`ProfileModel::Radius`] on a tie or when
+/// neither line fits).
+fn best_fitting_model(window: &[(f64, f64, f64)]) -> ProfileModel {
+    let squared_residuals = |model: ProfileModel| {
+        let measured: Vec<(f64, f64)> = window
+            .iter()
+            .map(|&(top, r, _)| (top, model_value(model, r)))
+            .collect();
+        line_fit(&measured).map_or(f64::INFINITY, |(a, b)| {
+            window
+                .iter()
+                .map(|&(top, r, _)| (model_radius(model, a + b * top) - r).powi(2))
+                .sum::<f64>()
+        })
+    };
+    if squared_residuals(ProfileModel::SquaredRadius) < squared_residuals(ProfileModel::Radius) {
+        ProfileModel::SquaredRadius
+    } else {
+        ProfileModel::Radius
     }
 }
 
@@ -1668,9 +1721,9 @@ pub fn analyze_scan(
 
 /// The fragility of a scan closed by [`close_scan`]: [`analyze_detailed`] on the contact
 /// reading whose α_min is the median of the 18 readings of [`MEDIAN_MODEL`] among
-/// [`ContactHypothesis::ensemble`]'s 36 with the support outline's unseen sectors interpolated
+/// [`ContactHypothesis::ensemble`]'s 54 with the support outline's unseen sectors interpolated
 /// (the plane moved by ±1.96 [`ClosedScan::contact_height_sigma_m`]); no single fit window
-/// holds for every shape of base, and the other model's readings widen the interval. Every
+/// holds for every shape of base, and the other models' readings widen the interval. Every
 /// reading is grown by the surface that lands before the rock topples
 /// ([`ClosedScan::landed_contact`]), as the truth's is.
 ///
@@ -2446,6 +2499,40 @@ mod tests {
         }
     }
 
+    /// (slab top, radius, azimuth) of a sector whose radius at height z (m) is `radius(z)`, over
+    /// the profile's 1–6 cm slabs.
+    fn sector_window(radius: impl Fn(f64) -> f64) -> Vec<(f64, f64, f64)> {
+        (1..=6)
+            .map(|k| {
+                let z = 0.01 * f64::from(k);
+                (z, radius(z), 0.3)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn each_sector_is_read_with_the_line_that_fits_its_profile() {
+        // A sphere of radius 0.6 m cut flat 2 cm above its bottom: r² = r0² + 2(R − e)z − z²,
+        // nearly linear in z, while r bends; r linear overshoots at the plane.
+        let (sphere_r, cut) = (0.6f64, 0.02f64);
+        let r0 = (2.0 * sphere_r * cut - cut * cut).sqrt();
+        let round = sector_window(|z| (r0 * r0 + 2.0 * (sphere_r - cut) * z - z * z).sqrt());
+        assert_eq!(best_fitting_model(&round), ProfileModel::SquaredRadius);
+        let read = |window: &[(f64, f64, f64)], model| radius_at_plane(window, model, 0.0).unwrap();
+        let best = read(&round, best_fitting_model(&round));
+        assert!((best - r0).abs() < 0.005, "{best} against {r0}");
+        // r linear reads it 1.6 cm wide, about 1.5° of α_min on a 0.6 m high centre of mass.
+        assert!(read(&round, ProfileModel::Radius) > r0 + 0.012);
+        // A cone narrowing to a 0.12 m contact: r linear is exact.
+        let cone = sector_window(|z| 0.12 + 0.8 * z);
+        assert_eq!(best_fitting_model(&cone), ProfileModel::Radius);
+        assert!((read(&cone, ProfileModel::Radius) - 0.12).abs() < 1e-9);
+        // Never wider than the narrowest slab fitted, and nothing from an empty window.
+        let flaring = sector_window(|z| 0.3 - z);
+        assert!((read(&flaring, ProfileModel::SquaredRadius) - 0.24).abs() < 1e-9);
+        assert_eq!(radius_at_plane(&[], ProfileModel::Radius, 0.0), None);
+    }
+
     #[test]
     fn the_interval_covers_a_contact_hidden_under_a_deep_fill() {
         // The wedge is filled 4.5 cm up instead of 1.5 cm: the scan's lowest slabs are the
@@ -2473,7 +2560,8 @@ mod tests {
         // Not vacuous.
         assert!(r.alpha_min_high_deg - r.alpha_min_low_deg < 0.6 * r.alpha_min_deg + 2.0);
         assert_eq!(r.alpha_interval.source, "scan_contact");
-        assert_eq!(r.alpha_interval.contact_hypotheses, 36);
+        // Three models × two skips × three fits × three plane heights.
+        assert_eq!(r.alpha_interval.contact_hypotheses, 54);
         // Without its margin and contact edge the interval is the readings' spread alone, and
         // misses.
         let mut narrow = config.clone();
