@@ -318,11 +318,18 @@ mod tests {
 
     #[test]
     fn runs_on_the_real_rock_ply() {
+        let mesh =
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/rocks/double_rock.ply");
+        // Where `../shared` is not beside the repository (a lone clone), skip as the library's
+        // real-rock tests do.
+        if !mesh.exists() {
+            println!("skipping: {} is absent", mesh.display());
+            return;
+        }
         let dir = tempfile::tempdir().unwrap();
         let figure = dir.path().join("rock.png");
         let args = FragilityArgs {
-            mesh: Path::new(env!("CARGO_MANIFEST_DIR"))
-                .join("../../shared/data/rocks/double_rock.ply"),
+            mesh,
             up: Some([0.0, 0.0, 1.0]),
             contact_height: Some(-0.06),
             pedestal: None,
