@@ -1012,49 +1012,52 @@ impl BasalProfile {
     }
 }
 
-/// The value a model fits to a slab's radius `r`: r² or r.
+/// The value a model fits to a slab's radius `r`: r² for [`ProfileModel::SquaredRadius`], else
+/// r.
 fn model_value(model: ProfileModel, r: f64) -> f64 {
     match model {
         ProfileModel::SquaredRadius => r * r,
-        _ => r,
+        ProfileModel::Radius | ProfileModel::BestFit => r,
     }
 }
 
-/// The radius a model's fitted value `v` stands for.
+/// The radius, metres, that a model's fitted value `v` stands for.
 fn model_radius(model: ProfileModel, v: f64) -> f64 {
     match model {
         ProfileModel::SquaredRadius => v.max(0.0).sqrt(),
-        _ => v,
+        ProfileModel::Radius | ProfileModel::BestFit => v,
     }
 }
 
-/// The radius, metres, that `model` fitted to `window` ((slab top, radius, azimuth)) gives at
-/// `offset_m` above the plane, capped by the narrowest slab of the window: a lowest slab wider
-/// than those above it is the TSDF filling the wedge's tip (the double rock's lowest slab read
-/// 0.48 m where the rock is 0.21 m across), or a flaring foot, which the cap underestimates
-/// (the safe side). `None` for an empty window.
-fn radius_at_plane(window: &[(f64, f64, f64)], model: ProfileModel, offset_m: f64) -> Option<f64> {
-    let narrowest = window.iter().map(|w| w.1).reduce(f64::min)?;
+/// The least-squares line (intercept, slope) of `model`'s value against the slab tops of
+/// `window` ((slab top m, radius m, azimuth rad)); `None` when the tops are all equal.
+fn model_line(window: &[(f64, f64, f64)], model: ProfileModel) -> Option<(f64, f64)> {
     let measured: Vec<(f64, f64)> = window
         .iter()
         .map(|&(top, r, _)| (top, model_value(model, r)))
         .collect();
-    Some(match line_fit(&measured) {
+    line_fit(&measured)
+}
+
+/// The radius, metres, that `model` fitted to `window` ((slab top m, radius m, azimuth rad))
+/// gives at `offset_m` above the plane, capped by the narrowest slab of the window: a lowest
+/// slab wider than those above it is the TSDF filling the wedge's tip (the double rock's lowest
+/// slab read 0.48 m where the rock is 0.21 m across), or a flaring foot, which the cap
+/// underestimates (the safe side). `None` for an empty window.
+fn radius_at_plane(window: &[(f64, f64, f64)], model: ProfileModel, offset_m: f64) -> Option<f64> {
+    let narrowest = window.iter().map(|w| w.1).reduce(f64::min)?;
+    Some(match model_line(window, model) {
         Some((a, b)) if b > 0.0 => model_radius(model, a + b * offset_m).clamp(0.0, narrowest),
         _ => narrowest,
     })
 }
 
-/// The model whose line fits `window`'s radii ((slab top, radius, azimuth)) with the smaller
-/// sum of squared residuals, in metres of radius ([`ProfileModel::Radius`] on a tie or when
-/// neither line fits).
+/// The model whose line fits `window`'s radii ((slab top m, radius m, azimuth rad)) with the
+/// smaller sum of squared residuals, in metres of radius ([`ProfileModel::Radius`] on a tie or
+/// when neither line fits).
 fn best_fitting_model(window: &[(f64, f64, f64)]) -> ProfileModel {
     let squared_residuals = |model: ProfileModel| {
-        let measured: Vec<(f64, f64)> = window
-            .iter()
-            .map(|&(top, r, _)| (top, model_value(model, r)))
-            .collect();
-        line_fit(&measured).map_or(f64::INFINITY, |(a, b)| {
+        model_line(window, model).map_or(f64::INFINITY, |(a, b)| {
             window
                 .iter()
                 .map(|&(top, r, _)| (model_radius(model, a + b * top) - r).powi(2))
