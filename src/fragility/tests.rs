@@ -681,13 +681,13 @@ fn a_given_contact_polygon_is_the_support() {
     assert!(matches!(bad, Err(FragilityError::Degenerate(_))), "{bad:?}");
 }
 
-/// The rock's faces above `contact_z` and the pedestal's below it as one open mesh, every
+/// The rock's faces above `contact_height_m` and the pedestal's below it as one open mesh, every
 /// triangle split in four `levels` times: a perfect scan of a world's target, as dense as a
 /// map's (the support's top is found from its faces).
 fn exact_scan(
     rock: &TriangleMesh,
     pedestal: &TriangleMesh,
-    contact_z: f64,
+    contact_height_m: f64,
     levels: u32,
 ) -> TriangleMesh {
     let keep = |mesh: &TriangleMesh, above: bool| -> Vec<[u32; 3]> {
@@ -697,9 +697,9 @@ fn exact_scan(
                 f.iter().all(|&i| {
                     let z = f64::from(mesh.positions[i as usize].z);
                     if above {
-                        z >= contact_z - 0.002
+                        z >= contact_height_m - 0.002
                     } else {
-                        z <= contact_z + 0.002
+                        z <= contact_height_m + 0.002
                     }
                 })
             })
@@ -740,12 +740,21 @@ fn the_scan_path_reads_the_worlds_targets_from_their_exact_surfaces() {
         for rock in world.rocks.iter().filter(|r| r.role == RockRole::Target) {
             let pedestal = rock.pedestal.as_ref().unwrap();
             let truth = analyze(&rock.mesh, ContactSpec::Pedestal(pedestal), &config).unwrap();
-            let contact_z = rock.contact.as_ref().unwrap().height_m;
-            let scan = exact_scan(&rock.mesh, pedestal, contact_z, 2);
+            let contact_height_m = rock.contact.as_ref().unwrap().height_m;
+            let scan = exact_scan(&rock.mesh, pedestal, contact_height_m, 2);
             let (_, analysis) = scan::analyze_scan(&scan, &config).unwrap();
             let r = &analysis.report;
             let error = r.alpha_min_deg - truth.alpha_min_deg;
             let slab = name == "library-a" && rock.id == 2;
+            println!(
+                "{name} rock {}: {:.2}° [{:.2}, {:.2}] against {:.2}° ({:+.2}°)",
+                rock.id,
+                r.alpha_min_deg,
+                r.alpha_min_low_deg,
+                r.alpha_min_high_deg,
+                truth.alpha_min_deg,
+                error
+            );
             assert!(
                 error.abs() < if slab { 2.6 } else { 1.2 },
                 "{name} rock {}: {:.2}° against {:.2}°",

@@ -1,10 +1,10 @@
 #!/usr/bin/env python3
 """Fragility on rocks no one tuned against: random shapes, scanned with true poses.
 
-usage: fresh_shapes.py --bin SCARP --out DIR [--seed 1] [--count 16] [--no-noise] [--jobs 2]
+usage: fresh_shapes.py --bin SCARP --out DIR [--seeds 1-4] [--count 16] [--no-noise] [--jobs 2]
                        [--rescore SCARP] [--config FRAGILITY.toml] [--exact]
 
-Draws `--count` rocks from `--seed`: procedural boulders and blocks (random size, squareness,
+Draws `--count` rocks from each of `--seeds` (`1-4`, or `1,3`): procedural boulders and blocks (random size, squareness,
 roughness, facets) and the built-in scanned stones, each at a random yaw, four in ten tilted
 5–15°, 0.8–1.4 m tall. Each stands on a 1.1 m pedestal whose top is the narrowest the world
 accepts (0.20 m, then 5 cm steps: as PBRs overhang their pedestals), on a flat 16 m world. Two
@@ -68,6 +68,15 @@ contact_radius_m = 0.15
 """
 PEDESTAL_M = 1.1
 STONES = ["stone_e22", "stone_073ac15d", "stone_0", "stone_a0", "double_rock"]
+
+
+def seeds(text):
+    """The seeds of `1-4` or `1,3` (or a mix: `1-2,5`)."""
+    out = []
+    for part in text.split(","):
+        first, _, last = part.partition("-")
+        out.extend(range(int(first), int(last or first) + 1))
+    return out
 
 
 def draw(seed, count):
@@ -244,7 +253,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--bin", required=True)
     ap.add_argument("--out", required=True)
-    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--seeds", default="1", help="seeds, `1-4` or `1,3`; their rocks are pooled")
     ap.add_argument("--count", type=int, default=16)
     ap.add_argument("--no-noise", action="store_true")
     ap.add_argument("--jobs", type=int, default=2)
@@ -254,7 +263,8 @@ def main():
     args = ap.parse_args()
     args.bin = os.path.abspath(args.bin)
     with ThreadPoolExecutor(args.jobs) as pool:
-        rows = list(pool.map(lambda r: make(args, r), draw(args.seed, args.count)))
+        rocks = [rock for seed in seeds(args.seeds) for rock in draw(seed, args.count)]
+        rows = list(pool.map(lambda r: make(args, r), rocks))
     name = "fresh_shapes_exact.json" if args.exact else "fresh_shapes.json"
     with open(os.path.join(args.out, name), "w") as out:
         json.dump(rows, out, indent=1)
@@ -270,10 +280,18 @@ def main():
     if done:
         errors = [r["alpha"] - r["truth"] for r in done]
         print(f"{len(done)} of {len(rows)} analysed: |error| <= 2° {sum(abs(e) <= 2 for e in errors)}, "
-              f"over +3° {sum(e > 3 for e in errors)}, truth inside "
-              f"{sum(r['low'] <= r['truth'] <= r['high'] for r in done)}, median width "
-              f"{statistics.median(r['high'] - r['low'] for r in done):.2f}°, median δ "
+              f"over +3° {sum(e > 3 for e in errors)}, under -3° {sum(e < -3 for e in errors)}, "
+              f"truth inside {sum(r['low'] <= r['truth'] <= r['high'] for r in done)}, median width "
+              f"{statistics.median(r['high'] - r['low'] for r in done):.2f}°, mean |error| "
+              f"{statistics.mean(abs(e) for e in errors):.2f}°, median error "
+              f"{statistics.median(errors):+.2f}°, median δ "
               f"{statistics.median(r['delta_cm'] for r in done):+.2f} cm")
+        for kind in ("boulder", "block", "stone"):
+            of_kind = [r for r in done if r["name"].endswith(kind)]
+            print(f"  {kind}s: {len(of_kind)} analysed, |error| <= 2° "
+                  f"{sum(abs(r['alpha'] - r['truth']) <= 2 for r in of_kind)}, over +3° "
+                  f"{sum(r['alpha'] - r['truth'] > 3 for r in of_kind)}, truth inside "
+                  f"{sum(r['low'] <= r['truth'] <= r['high'] for r in of_kind)}")
 
 
 if __name__ == "__main__":

@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
 """Re-analyse every true target's mission mesh (F@2cm ≥ 0.85) of campaign folders with a scarp
 binary, as the mission analyses it (`scarp fragility --scan --json`), and tabulate α against the
-truth: analysed, refused, |error| ≤ 2°, overestimates over 3°, truth inside, median width.
+truth: analysed, refused, |error| ≤ 2°, overestimates over 3°, truth inside, median width, mean
+|error| and median error, and each interval source's median half-widths.
 With --pair, compare two such result files mesh by mesh instead.
 
 Usage:
@@ -40,7 +41,7 @@ def analyse(binary, job):
     else:
         f = json.loads(out.stdout)
         row.update(alpha=f["alpha_min_deg"], low=f["alpha_min_low_deg"],
-                   high=f["alpha_min_high_deg"])
+                   high=f["alpha_min_high_deg"], sources=f["alpha_interval"]["sources"])
     return row
 
 
@@ -81,6 +82,14 @@ def main():
     print(f"{len(rows)} meshes, {len(done)} analysed, {len(rows) - len(done)} refused")
     print(f"|error| <= 2°: {within}/{len(done)} analysed; over +3°: {sum(e > 3 for e in errors)}; "
           f"truth inside: {inside}/{len(done)}; median width {width:.2f}°")
+    if done:
+        print(f"mean |error| {statistics.mean(abs(e) for e in errors):.2f}°, median error "
+              f"{statistics.median(errors):+.2f}°")
+        names = sorted({s["name"] for r in done for s in r["sources"]})
+        print("interval sources, median below / above (°): " + ", ".join(
+            f"{n} {statistics.median(s['below_deg'] for r in done for s in r['sources'] if s['name'] == n):.2f}"
+            f" / {statistics.median(s['above_deg'] for r in done for s in r['sources'] if s['name'] == n):.2f}"
+            for n in names))
     for r in sorted(done, key=lambda r: -abs(r["alpha"] - r["gt"]))[:6]:
         print(f"  {r['run'].split('/runs/')[-1]} rock {r['rock']}: {describe(r)}, truth {r['gt']:.2f}")
 
