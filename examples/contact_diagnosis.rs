@@ -175,10 +175,14 @@ fn single_mesh(args: &[String]) -> Result<()> {
         .context("no such rock in the world")?;
     let pedestal = rock.pedestal.as_ref().context("the rock has no pedestal")?;
     let truth = analyze(&rock.mesh, ContactSpec::Pedestal(pedestal), &config)?;
-    match analyze_scan(&read_mesh(mesh)?, &config) {
+    let mesh = read_mesh(mesh)?;
+    match analyze_scan(&mesh, &config) {
         Ok((closed, a)) => {
             print_readings(label, truth.alpha_min_deg, &closed, &a, &config);
             print_plane(label, &closed, truth.contact_height_m);
+            if std::env::var("PROFILE").is_ok_and(|v| &v == label) {
+                print_target_profile(&truth, &rock.mesh, &mesh, Some(&(closed, a)));
+            }
         }
         Err(e) => println!(
             "REFUSED {label} {:.3} {}",
@@ -247,41 +251,12 @@ fn main() -> Result<()> {
             world_mesh.transform(&world_from_map(&target_dir)?);
             let world_analysis = analyze_scan(&world_mesh, &config);
             if std::env::var("PROFILE").is_ok_and(|v| v == label) {
-                print_profiles(&truth, &rock.mesh, &world_mesh);
-                let polygon = |name: &str, r: &FragilityReport| {
-                    let xy: Vec<String> = r
-                        .contact_polygon
-                        .iter()
-                        .map(|p| format!("({:.3},{:.3})", p[0], p[1]))
-                        .collect();
-                    println!(
-                        "{name}: α {:.2} at azimuth {:.0}°, com ({:.3},{:.3},{:.3}), contact {}",
-                        r.alpha_min_deg,
-                        r.alpha_min_azimuth_deg,
-                        r.center_of_mass[0],
-                        r.center_of_mass[1],
-                        r.center_of_mass[2],
-                        xy.join(" ")
-                    );
-                };
-                polygon("truth", &truth);
-                if let Ok((closed, a)) = &world_analysis {
-                    polygon("scan", &a.report);
-                    if let Some(o) = &closed.support_outline {
-                        let xy: Vec<String> = o
-                            .hull(scarp::fragility::scan::OutlineGaps::Interpolated)
-                            .unwrap_or_default()
-                            .iter()
-                            .map(|p| format!("({:.3},{:.3})", p.x, p.y))
-                            .collect();
-                        println!(
-                            "outline: seen {} of {}: {}",
-                            o.seen_sectors(),
-                            o.radius_m.len(),
-                            xy.join(" ")
-                        );
-                    }
-                }
+                print_target_profile(
+                    &truth,
+                    &rock.mesh,
+                    &world_mesh,
+                    world_analysis.as_ref().ok(),
+                );
             }
             match (map_alpha, world_analysis) {
                 (Ok(a_map), Ok((_, analysis))) => {
@@ -402,6 +377,78 @@ fn glob_runs(dir: &Path) -> Result<Vec<PathBuf>> {
         }
     }
     Ok(out)
+}
+
+/// What `PROFILE=LABEL` prints for one target: the per-sector profiles of the world's rock and of
+/// the scan ([`print_profiles`]), the scan's own basal profile as the analysis measured it, and
+/// the true and scanned contact polygons with the support outline the scan read.
+fn print_target_profile(
+    truth: &FragilityReport,
+    rock: &scarp_slam::TriangleMesh,
+    scan: &scarp_slam::TriangleMesh,
+    analysis: Option<&(ClosedScan, FragilityAnalysis)>,
+) {
+    print_profiles(truth, rock, scan);
+    let polygon = |name: &str, r: &FragilityReport| {
+        let xy: Vec<String> = r
+            .contact_polygon
+            .iter()
+            .map(|p| format!("({:.3},{:.3})", p[0], p[1]))
+            .collect();
+        println!(
+            "{name}: α {:.2} at azimuth {:.0}°, com ({:.3},{:.3},{:.3}), contact {}",
+            r.alpha_min_deg,
+            r.alpha_min_azimuth_deg,
+            r.center_of_mass[0],
+            r.center_of_mass[1],
+            r.center_of_mass[2],
+            xy.join(" ")
+        );
+    };
+    polygon("truth", truth);
+    let Some((closed, a)) = analysis else {
+        return;
+    };
+    polygon("scan", &a.report);
+    let profile = &closed.profile;
+    println!(
+        "scan profile: axis ({:.3},{:.3}), plane {:.4} m, slab tops {:?} cm",
+        profile.axis_xy.x,
+        profile.axis_xy.y,
+        profile.plane_z,
+        profile
+            .slab_top_m
+            .iter()
+            .map(|t| (t * 1000.0).round() / 10.0)
+            .collect::<Vec<_>>()
+    );
+    for (s, (radii, azimuths)) in profile
+        .radius_m
+        .iter()
+        .zip(&profile.azimuth_rad)
+        .enumerate()
+    {
+        let cells: Vec<String> = radii
+            .iter()
+            .zip(azimuths)
+            .map(|(r, az)| format!("{:4.1}@{:3.0}", r * 100.0, az.to_degrees()))
+            .collect();
+        println!("  sector {s:2}: {}", cells.join(" "));
+    }
+    if let Some(o) = &closed.support_outline {
+        let xy: Vec<String> = o
+            .hull(scarp::fragility::scan::OutlineGaps::Interpolated)
+            .unwrap_or_default()
+            .iter()
+            .map(|p| format!("({:.3},{:.3})", p.x, p.y))
+            .collect();
+        println!(
+            "outline: seen {} of {}: {}",
+            o.seen_sectors(),
+            o.radius_m.len(),
+            xy.join(" ")
+        );
+    }
 }
 
 /// Per-sector largest radius of each mesh's vertices in 1 cm slabs above the true contact, around

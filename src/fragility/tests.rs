@@ -729,10 +729,11 @@ fn exact_scan(
 #[test]
 fn the_scan_path_reads_the_worlds_targets_from_their_exact_surfaces() {
     // With no map in between, the scan path's error is the contact extrapolation's alone. On the
-    // three worlds' 11 targets (the rocks its settings were chosen on) it holds within 1.2° but
-    // for library-a's slab on edge (+2.2°, whose rounded edge the profile reads wide); on rocks
-    // of random shape it does not (`docs/campaigns/tools/fresh_shapes.py --exact`: 37 of 59
-    // within 2°, session 47), and this test is the floor a better contact model must keep.
+    // three worlds' 11 targets (the rocks its settings were chosen on) it holds within 1.2°, each
+    // inside its interval. Library-a's slab on edge read +2.2° until session 48, whose rounded
+    // edge the profile above the cut reads wide and the surface below it does not
+    // (`ScanConfig::cap_by_low_reach`). It is the floor, not a proof of generality: on rocks of
+    // random shape (`docs/campaigns/tools/fresh_shapes.py --exact`) 49 of 59 are within 2°.
     use scarp_datasets::world::{RockRole, World};
     let config = FragilityConfig::default();
     for name in ["default", "library-a", "library-b"] {
@@ -745,7 +746,6 @@ fn the_scan_path_reads_the_worlds_targets_from_their_exact_surfaces() {
             let (_, analysis) = scan::analyze_scan(&scan, &config).unwrap();
             let r = &analysis.report;
             let error = r.alpha_min_deg - truth.alpha_min_deg;
-            let slab = name == "library-a" && rock.id == 2;
             println!(
                 "{name} rock {}: {:.2}° [{:.2}, {:.2}] against {:.2}° ({:+.2}°)",
                 rock.id,
@@ -756,23 +756,21 @@ fn the_scan_path_reads_the_worlds_targets_from_their_exact_surfaces() {
                 error
             );
             assert!(
-                error.abs() < if slab { 2.6 } else { 1.2 },
+                error.abs() < 1.2,
                 "{name} rock {}: {:.2}° against {:.2}°",
                 rock.id,
                 r.alpha_min_deg,
                 truth.alpha_min_deg
             );
-            if !slab {
-                assert!(
-                    r.alpha_min_low_deg <= truth.alpha_min_deg
-                        && truth.alpha_min_deg <= r.alpha_min_high_deg,
-                    "{name} rock {}: {:.2}° outside [{:.2}, {:.2}]",
-                    rock.id,
-                    truth.alpha_min_deg,
-                    r.alpha_min_low_deg,
-                    r.alpha_min_high_deg
-                );
-            }
+            assert!(
+                r.alpha_min_low_deg <= truth.alpha_min_deg
+                    && truth.alpha_min_deg <= r.alpha_min_high_deg,
+                "{name} rock {}: {:.2}° outside [{:.2}, {:.2}]",
+                rock.id,
+                truth.alpha_min_deg,
+                r.alpha_min_low_deg,
+                r.alpha_min_high_deg
+            );
         }
     }
 }
