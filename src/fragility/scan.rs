@@ -1060,7 +1060,7 @@ const LOW_REACH_LEVELS_M: [f64; 5] = [0.003, 0.0055, 0.008, 0.0105, 0.013];
 /// 6.19° read 13.43° on its exact surface, its contact 5–10 cm too wide on one side, where the
 /// underside rises 22 cm out from the contact at 1.3 cm up). The surface below the cut shows
 /// the underside rising from the contact: the scan sees air under the rock there (that block:
-/// 11.13° exact, 8.74° mapped, from 12.88°).
+/// 11.13° exact, 8.78° mapped, from 13.43° and 12.88°).
 fn low_reach(
     mesh: &TriangleMesh,
     profile: &BasalProfile,
