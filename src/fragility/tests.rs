@@ -733,7 +733,7 @@ fn the_scan_path_reads_the_worlds_targets_from_their_exact_surfaces() {
     // inside its interval. Library-a's slab on edge read +2.2° until session 48, whose rounded
     // edge the profile above the cut reads wide and the surface below it does not
     // (`ScanConfig::cap_by_low_reach`). It is the floor, not a proof of generality: on rocks of
-    // random shape (`docs/campaigns/tools/fresh_shapes.py --exact`) 49 of 59 are within 2°.
+    // random shape (`docs/campaigns/tools/fresh_shapes.py --exact`) 52 of 59 are within 2°.
     use scarp_datasets::world::{RockRole, World};
     let config = FragilityConfig::default();
     for name in ["default", "library-a", "library-b"] {
