@@ -183,12 +183,12 @@ pub struct ScanConfig {
     /// where the rock's underside lifts off within the lowest centimetre, the profile above
     /// the cut cannot see it. Default true. Session 48, against false:
     /// - 59 rocks of random shape (`docs/campaigns/tools/fresh_shapes.py --exact`, seeds 1–4),
-    ///   their exact surfaces: within 2° 37 → 52, over +3° 8 → 2, truth inside 45 → 54, mean
-    ///   |error| 1.87° → 1.10°; 59 others drawn afterwards (seeds 5–8): within 2° 44 → 49,
-    ///   over +3° 6 → 1, inside 48 → 55; the TSDF maps of the first 59 (55 analysed): within
-    ///   2° 36 → 37, over +3° 9 → 6, inside 42 → 45;
+    ///   their exact surfaces: within 2° 37 → 52, over +3° 8 → 2, truth inside 45 → 53, mean
+    ///   |error| 1.87° → 1.09°; 59 others drawn afterwards (seeds 5–8): within 2° 44 → 49,
+    ///   over +3° 6 → 1, inside 48 → 56, mean |error| 1.38° → 0.95°; the TSDF maps of the
+    ///   first 59 (55 analysed): within 2° 36 → 39, over +3° 9 → 6, inside 42 → 45;
     /// - 152 mission meshes (four campaigns, seeds 60–64): within 2° 139 → 141, inside 144 →
-    ///   146, median width 4.33° → 4.12°; 91 of a ten-seed campaign (seeds 60–69): within 2° 88
+    ///   146, median width 4.33° → 4.14°; 91 of a ten-seed campaign (seeds 60–69): within 2° 88
     ///   → 88, inside 89 → 89, width 4.59° → 4.39°.
     pub cap_by_low_reach: bool,
 }
@@ -1091,8 +1091,8 @@ fn low_reach(
         };
     }
     let radius_of = |p: &Point3<f64>| (p.xy() - axis_xy).norm();
-    // `widest[sector][level]`: the farthest cut point, world frame.
-    let mut widest: Vec<Vec<Option<Point3<f64>>>> = vec![vec![None; levels.len()]; sectors];
+    // `cuts[sector][level]`: the section's points, world frame.
+    let mut cuts: Vec<Vec<Vec<Point3<f64>>>> = vec![vec![Vec::new(); levels.len()]; sectors];
     for face in &mesh.faces {
         let [a, b, c] = face.map(|v| mesh.positions[v as usize].cast::<f64>());
         let (z_min, z_max) = (a.z.min(b.z).min(c.z), a.z.max(b.z).max(c.z));
@@ -1108,24 +1108,23 @@ fn low_reach(
                     continue;
                 }
                 let t = (z - p.z) / (q.z - p.z);
-                let xy = Point2::new(p.x + t * (q.x - p.x), p.y + t * (q.y - p.y));
-                let r = (xy - axis_xy).norm();
-                if r > config.support_radius_m {
-                    continue;
-                }
-                let entry = &mut widest[sector_of(&xy, axis_xy, sectors)][k];
-                if entry.is_none_or(|best| r > radius_of(&best)) {
-                    *entry = Some(Point3::new(xy.x, xy.y, z));
+                let point = Point3::new(p.x + t * (q.x - p.x), p.y + t * (q.y - p.y), z);
+                if radius_of(&point) <= config.support_radius_m {
+                    cuts[sector_of(&point.xy(), axis_xy, sectors)][k].push(point);
                 }
             }
         }
     }
     let mut radius_m = vec![None; sectors];
     let mut points = Vec::new();
-    for (sector, by_level) in widest.iter().enumerate() {
+    for (sector, by_level) in cuts.iter_mut().enumerate() {
+        for cut in by_level.iter_mut() {
+            cut.sort_by(|p, q| radius_of(p).total_cmp(&radius_of(q)));
+        }
+        // (height above the plane, radius) of each level's farthest point.
         let seen: Vec<(f64, f64)> = by_level
             .iter()
-            .flatten()
+            .filter_map(|cut| cut.last())
             .map(|p| (p.z - plane.height_m, radius_of(p)))
             .take(3)
             .collect();
@@ -1140,7 +1139,17 @@ fn low_reach(
         }
         let narrowest = seen.iter().map(|s| s.1).fold(f64::INFINITY, f64::min);
         radius_m[sector] = Some(a.clamp(0.0, narrowest));
-        points.extend(by_level.iter().flatten());
+        // The whole underside lands, not only its far edge: where that lies beyond the
+        // support's edge, the part over the support is what the rock tips onto (a block's flat
+        // underside 4 mm over a pedestal 0.2 m across, reaching 0.37 m out).
+        for cut in by_level.iter() {
+            points.extend(
+                cut.chunk_by(|p, q| {
+                    (radius_of(p) / LANDING_BIN_M).floor() == (radius_of(q) / LANDING_BIN_M).floor()
+                })
+                .filter_map(<[Point3<f64>]>::last),
+            );
+        }
     }
     LowReach { radius_m, points }
 }
@@ -1159,11 +1168,14 @@ struct LowReach {
     /// Per sector, the radius the underside reaches at the plane, metres; `None` where there is
     /// no underside.
     radius_m: Vec<Option<f64>>,
-    /// The farthest point of each underside sector's cross-section at each level (world frame,
-    /// metres): below the cut, they land on the support as the rock tips like the scan's own
-    /// vertices.
+    /// The underside sectors' cross-sections, one point (the farthest) per [`LANDING_BIN_M`] of
+    /// radius per level (world frame, metres): below the cut, they land on the support as the
+    /// rock tips like the scan's own vertices.
     points: Vec<Point3<f64>>,
 }
+
+/// The underside's cross-sections land one point per this much radius, metres.
+const LANDING_BIN_M: f64 = 0.01;
 
 /// The value a model fits to a slab's radius `r`: r² for [`ProfileModel::SquaredRadius`], else
 /// r.
