@@ -2101,7 +2101,7 @@ fn reading_sources(
 mod tests {
     use super::*;
     use crate::fragility::test_shapes::{loft_solid, regular_ring, to_mesh};
-    use crate::fragility::{ContactSpec, FragilityConfig, analyze};
+    use crate::fragility::{ContactSpec, FragilityConfig, FragilityReport, analyze};
 
     /// A round rock (0.84 m across, 0.8 m tall) on a narrow neck (0.28 m) on a wide pedestal, as
     /// one open surface: no bottom, like a scan.
@@ -2443,6 +2443,22 @@ mod tests {
         )
     }
 
+    /// Panics unless `report`'s α_min is within `tolerance_deg` of `truth_deg` and its interval
+    /// holds the truth.
+    fn assert_reads_within(report: &FragilityReport, truth_deg: f64, tolerance_deg: f64) {
+        assert!(
+            (report.alpha_min_deg - truth_deg).abs() < tolerance_deg,
+            "α_min {} vs {truth_deg}",
+            report.alpha_min_deg
+        );
+        assert!(
+            report.alpha_min_low_deg <= truth_deg && truth_deg <= report.alpha_min_high_deg,
+            "{truth_deg} not in [{}, {}]",
+            report.alpha_min_low_deg,
+            report.alpha_min_high_deg
+        );
+    }
+
     /// A column 1.2 m tall, widening from radius `side_m` to `side_m` + 0.24 m at its top, whose
     /// base lifts off its pedestal (a column of radius `top_m` for its top 0.2 m) from a contact of radius
     /// `contact_m` to the column's side 1.2 cm up (as a scan, every 2 mm up the underside, and
@@ -2490,20 +2506,7 @@ mod tests {
         let truth = analyze(&rock, ContactSpec::Pedestal(&pedestal), &config).unwrap();
         let (closed, analysis) = analyze_scan(&scan, &config).unwrap();
         let r = &analysis.report;
-        assert!(
-            (r.alpha_min_deg - truth.alpha_min_deg).abs() < 1.0,
-            "α_min {} vs {}",
-            r.alpha_min_deg,
-            truth.alpha_min_deg
-        );
-        assert!(
-            r.alpha_min_low_deg <= truth.alpha_min_deg
-                && truth.alpha_min_deg <= r.alpha_min_high_deg,
-            "{} not in [{}, {}]",
-            truth.alpha_min_deg,
-            r.alpha_min_low_deg,
-            r.alpha_min_high_deg
-        );
+        assert_reads_within(r, truth.alpha_min_deg, 1.0);
         // Every sector's reach is the contact's radius within a few millimetres.
         for reach in &closed.profile.low_reach_m {
             let reach = reach.expect("every sector is cut below the cut");
@@ -2591,20 +2594,7 @@ mod tests {
         let truth = analyze(&rock, ContactSpec::Pedestal(&pedestal), &config).unwrap();
         let (closed, analysis) = analyze_scan(&scan, &config).unwrap();
         let r = &analysis.report;
-        assert!(
-            (r.alpha_min_deg - truth.alpha_min_deg).abs() < 1.5,
-            "α_min {} vs {}",
-            r.alpha_min_deg,
-            truth.alpha_min_deg
-        );
-        assert!(
-            r.alpha_min_low_deg <= truth.alpha_min_deg
-                && truth.alpha_min_deg <= r.alpha_min_high_deg,
-            "{} not in [{}, {}]",
-            truth.alpha_min_deg,
-            r.alpha_min_low_deg,
-            r.alpha_min_high_deg
-        );
+        assert_reads_within(r, truth.alpha_min_deg, 1.5);
         // Without landing, the extrapolated contact is the column's (or less).
         let unlanded = closed
             .contact_under(&ContactHypothesis::POINT_ESTIMATE)
