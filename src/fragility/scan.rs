@@ -332,9 +332,10 @@ pub struct ClosedScan {
     pub contact_polygon: Vec<[f64; 3]>,
     /// The basal profile the contact is extrapolated from.
     pub profile: BasalProfile,
-    /// The scanned surface's farthest points per sector just above the support, below the cut
-    /// (world frame, metres; [`ScanConfig::cap_by_low_reach`]): they cap the contact's reach
-    /// ([`BasalProfile::low_reach_m`]) and land on the support like the rock's own vertices.
+    /// The rock's underside seen just above the support, below the cut: its sections in the
+    /// sectors where it lifts off, one point per centimetre of radius per level (world frame,
+    /// metres; [`ScanConfig::cap_by_low_reach`]). They land on the support like the rock's
+    /// own vertices; the same sections cap the contact ([`BasalProfile::low_reach_m`]).
     pub low_surface: Vec<Point3<f64>>,
     /// The edge of the support's top seen around the rock, when the support plane was found
     /// and its side seen in enough sectors: the contact cannot reach beyond it.
