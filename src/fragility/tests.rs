@@ -681,6 +681,27 @@ fn a_given_contact_polygon_is_the_support() {
     assert!(matches!(bad, Err(FragilityError::Degenerate(_))), "{bad:?}");
 }
 
+/// Panics unless `report`'s α_min (of the rock `label` names) is within `tolerance_deg` of
+/// `truth_deg` and its interval holds the truth.
+pub(crate) fn assert_reads_within(
+    label: &str,
+    report: &FragilityReport,
+    truth_deg: f64,
+    tolerance_deg: f64,
+) {
+    assert!(
+        (report.alpha_min_deg - truth_deg).abs() < tolerance_deg,
+        "{label}: α_min {:.2}° against {truth_deg:.2}°",
+        report.alpha_min_deg
+    );
+    assert!(
+        report.alpha_min_low_deg <= truth_deg && truth_deg <= report.alpha_min_high_deg,
+        "{label}: {truth_deg:.2}° outside [{:.2}, {:.2}]",
+        report.alpha_min_low_deg,
+        report.alpha_min_high_deg
+    );
+}
+
 /// The rock's faces above `contact_height_m` and the pedestal's below it as one open mesh, every
 /// triangle split in four `levels` times: a perfect scan of a world's target, as dense as a
 /// map's (the support's top is found from its faces).
@@ -755,21 +776,11 @@ fn the_scan_path_reads_the_worlds_targets_from_their_exact_surfaces() {
                 truth.alpha_min_deg,
                 error
             );
-            assert!(
-                error.abs() < 1.2,
-                "{name} rock {}: {:.2}° against {:.2}°",
-                rock.id,
-                r.alpha_min_deg,
-                truth.alpha_min_deg
-            );
-            assert!(
-                r.alpha_min_low_deg <= truth.alpha_min_deg
-                    && truth.alpha_min_deg <= r.alpha_min_high_deg,
-                "{name} rock {}: {:.2}° outside [{:.2}, {:.2}]",
-                rock.id,
+            assert_reads_within(
+                &format!("{name} rock {}", rock.id),
+                r,
                 truth.alpha_min_deg,
-                r.alpha_min_low_deg,
-                r.alpha_min_high_deg
+                1.2,
             );
         }
     }
