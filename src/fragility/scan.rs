@@ -180,7 +180,7 @@ pub struct ScanConfig {
     /// claim.
     pub require_support_plane: bool,
     /// Cap each sector's extrapolated contact radius by the scan's own surface just above the
-    /// support, below the cut ([`low_reach`]), and let that surface land like the rock's own:
+    /// support, below the cut (`low_reach`), and let that surface land like the rock's own:
     /// where the rock's underside lifts off within the lowest centimetre, the profile above
     /// the cut cannot see it. Default true. Session 48, against false:
     /// - 59 rocks of random shape (`docs/campaigns/tools/fresh_shapes.py --exact`, seeds 1–4),
@@ -889,7 +889,7 @@ pub struct BasalProfile {
     /// sector with no measurement in them gives no contact point ([`Self::contact`]).
     pub contact_near_slabs: usize,
     /// Per sector, the radius the rock's underside just above the support reaches at the plane
-    /// ([`low_reach`]), metres; `None` where no underside is seen there. A sector's contact
+    /// (`low_reach`), metres; `None` where no underside is seen there. A sector's contact
     /// radius is never wider.
     pub low_reach_m: Vec<Option<f64>>,
 }

@@ -10,7 +10,9 @@
 //! the free space in front of a measured surface, not under the ground: [`free_space`]), and
 //! the noised points are resampled ([`update`]). A Gaussian fit of the set gives
 //! the centre, the PCA ellipsoid, λ_max, the KL divergence between successive fits and the
-//! differential entropy ([`gaussian`]), which drive each target's status ([`target`]). The
+//! differential entropy ([`gaussian`]), which drive each target's status ([`target`]); the
+//! centre reported, C_e, is the point nearest the keyframe boxes' central rays once they spread
+//! enough ([`triangulation`]). The
 //! [`catalog`] keeps the targets, removes false ones with hit and miss counters and merges
 //! duplicates.
 //!
@@ -48,6 +50,7 @@ pub mod silhouette;
 pub mod target;
 #[cfg(test)]
 pub(crate) mod test_scenes;
+pub mod triangulation;
 pub mod update;
 
 pub use catalog::{ObserveReport, TargetCatalog};

@@ -5,6 +5,12 @@ use serde::{Deserialize, Serialize};
 
 use super::LocalizationConfig;
 use super::gaussian::{Ellipsoid, Gaussian3};
+use super::triangulation::{BoxRay, nearest_point};
+
+/// The least spread of the keyframe boxes' rays for C_e to come from their nearest point
+/// ([`Target::located_center`]): the smallest eigenvalue of their mean `I − d dᵀ`, about that
+/// of views 26° apart. Rays from a narrower arc place the object badly along the line of sight.
+const MIN_RAY_SPREAD: f64 = 0.05;
 
 /// Where a target stands. Statuses only move forward.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
@@ -52,6 +58,9 @@ pub struct Target {
     /// The object's horizontal centre that the depth inside each keyframe box gave (world xy,
     /// m), since registration or the last restart.
     pub(crate) seen_centers_xy: Vec<Point2<f64>>,
+    /// The ray through each keyframe box's centre (world), since registration or the last
+    /// restart.
+    pub(crate) box_rays: Vec<BoxRay>,
 }
 
 impl Target {
@@ -82,6 +91,7 @@ impl Target {
             view_positions: vec![Point3::from(world_from_camera.translation.vector)],
             restart_pending: false,
             seen_centers_xy: Vec::new(),
+            box_rays: Vec::new(),
         })
     }
 
@@ -208,18 +218,39 @@ impl Target {
         self.seen_centers_xy.push(center_xy);
     }
 
+    /// Records the ray through this keyframe box's centre.
+    pub fn record_box_ray(&mut self, ray: BoxRay) {
+        self.box_rays.push(ray);
+    }
+
+    /// How many keyframe boxes' rays are recorded.
+    pub fn box_rays(&self) -> usize {
+        self.box_rays.len()
+    }
+
     /// How many keyframes gave an object centre from their depth.
     pub fn seen_centers(&self) -> usize {
         self.seen_centers_xy.len()
     }
 
-    /// C_e as the mission reports and plans with it, world frame, m: horizontally the median
-    /// (per axis) of the seen centres once there are at least `min_views` of them (and
-    /// `min_views` > 0), else the points' mean; vertically the points' mean. See
+    /// C_e as the mission reports and plans with it, world frame, m, once at least
+    /// `min_views` > 0 keyframes gave their evidence (else, and with 0, the points' mean): the
+    /// point nearest the keyframe boxes' central rays
+    /// ([`super::triangulation::nearest_point`]) where they spread enough to place it;
+    /// otherwise horizontally the median (per axis) of the object centres the depth in the
+    /// boxes gave, and vertically the points' mean. See
     /// [`LocalizationConfig::center_from_depth_views`].
     pub fn located_center(&self, min_views: usize) -> Point3<f64> {
         let mean = self.center();
-        if min_views == 0 || self.seen_centers_xy.len() < min_views {
+        if min_views == 0 {
+            return mean;
+        }
+        if self.box_rays.len() >= min_views
+            && let Some(point) = nearest_point(&self.box_rays, MIN_RAY_SPREAD)
+        {
+            return point;
+        }
+        if self.seen_centers_xy.len() < min_views {
             return mean;
         }
         let median = |axis: fn(&Point2<f64>) -> f64, fallback: f64| {

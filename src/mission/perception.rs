@@ -34,8 +34,8 @@ use crate::tracking::tracker::{Tracker, TrackerConfig};
 pub struct TargetState {
     /// Localization target id.
     pub id: u32,
-    /// C_e, world ENU metres: the depth filter's [`Target::located_center`] (horizontally the
-    /// object centres its keyframe boxes' depth gave, once there are enough).
+    /// C_e, world ENU metres: the depth filter's [`Target::located_center`] (the point nearest
+    /// its keyframe boxes' central rays, once there are enough).
     pub center: Point3<f64>,
     /// Its point set, world ENU metres.
     pub points: Vec<Point3<f64>>,
