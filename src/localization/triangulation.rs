@@ -11,6 +11,7 @@
 
 use nalgebra::{Isometry3, Matrix3, Point2, Point3, SymmetricEigen, Unit, Vector3};
 use scarp_slam::PinholeCamera;
+use scarp_slam::ba::RobustLoss;
 
 use crate::detection::BoundingBox;
 
@@ -56,7 +57,7 @@ const MIN_RAYS: usize = 3;
 const ROUNDS: usize = 5;
 
 /// A ray farther from the solution than this many robust scales of the rays' distances is
-/// down-weighted in proportion (a Huber weight).
+/// down-weighted in proportion (the Huber weight of [`RobustLoss`]).
 const HUBER_SCALES: f64 = 2.0;
 
 /// The smallest robust scale of the rays' distances, m: about the detector's box jitter (σ 4 px)
@@ -88,15 +89,13 @@ pub fn nearest_point(rays: &[BoxRay], min_spread: f64) -> Option<Point3<f64>> {
             return None;
         }
         let solved = Point3::from(normal.cholesky()?.solve(&rhs));
-        let mut distances: Vec<f64> = rays.iter().map(|r| r.distance_m(&solved)).collect();
-        for (w, d) in weights.iter_mut().zip(&distances) {
-            *w = *d;
-        }
-        let median = scarp_slam::stats::quantile_in_place(&mut distances, 0.5)?;
-        let limit_m = HUBER_SCALES * (1.4826 * median).max(MIN_SCALE_M);
-        for w in &mut weights {
-            *w = if *w <= limit_m { 1.0 } else { limit_m / *w };
-        }
+        let distances: Vec<f64> = rays.iter().map(|r| r.distance_m(&solved)).collect();
+        let median = scarp_slam::stats::quantile_in_place(&mut distances.clone(), 0.5)?;
+        // The loss's threshold is in the residual's units, here metres.
+        let huber = RobustLoss::Huber {
+            delta_px: HUBER_SCALES * (1.4826 * median).max(MIN_SCALE_M),
+        };
+        weights = distances.iter().map(|d| huber.weight(d * d)).collect();
         point = Some(solved);
     }
     point
