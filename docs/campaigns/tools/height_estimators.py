@@ -16,6 +16,11 @@ ground at the foot to the object's 99th-percentile height), mido / mid95o (halfw
 object's 5th to its 99th / 95th percentile height), sph (a round body's centre from its top and
 lowest visible point at the view's elevation), surf (the surface at the box centre) and med50
 (the object points' median). Each is the median over the target's keyframe views.
+
+It then prints the point nearest the box-centre rays (what `localization::triangulation`
+computes) three ways: in the frame flown, and with each ray moved to its keyframe's true pose
+(the keyframe found in the run's `trajectory.txt` by its camera position, its estimator error
+read against `groundtruth.txt`), vertically and horizontally, and its 3D count within 0.5 m.
 """
 import glob
 import json
@@ -46,8 +51,14 @@ def rays_nearest_point(rays):
     return point
 
 
+def load_tum_positions(path):
+    rows = [line.split() for line in open(path) if not line.startswith("#")]
+    return np.array([[float(x) for x in r[1:4]] for r in rows])
+
+
 KEYS = ["now", "tri", "ray", "mid99", "mido", "mid95o", "sph", "surf", "med50"]
 rows = []
+rays_rows = []
 for err in sorted(glob.glob("d-*.err")):
     run = err[:-4]
     try:
@@ -55,6 +66,8 @@ for err in sorted(glob.glob("d-*.err")):
     except (OSError, ValueError):
         continue
     rocks = {r["id"]: r for r in json.load(open(run + "/world_gt/world.json"))["rocks"]}
+    estimated = load_tum_positions(run + "/trajectory.txt")
+    estimator_error = estimated - load_tum_positions(run + "/groundtruth.txt")
     targets = {t["id"]: t for t in mission["targets"]}
     views = {}
     for line in open(err):
@@ -71,7 +84,7 @@ for err in sorted(glob.glob("d-*.err")):
         truth = np.array(rocks[t["gt_rock_id"]]["centroid"]) + np.array(t["estimator_error_at_localization_m"])
         c = np.array(j["center"])
         est = {k: [] for k in KEYS if k not in ("now", "tri")}
-        rays = []
+        rays, true_rays = [], []
         for v in views.get(j["id"], []):
             e, s = np.array(v["eye"]), np.array(v["surface"])
             d = s - e
@@ -89,11 +102,18 @@ for err in sorted(glob.glob("d-*.err")):
             est["surf"].append(s[2])
             est["med50"].append(q[2])
             rays.append((e, d / np.linalg.norm(d)))
+            frame_error = estimator_error[np.argmin(np.linalg.norm(estimated - e, axis=1))]
+            true_rays.append((e - frame_error, d / np.linalg.norm(d)))
         row = {"run": run, "rock": t["gt_rock_id"], "h": np.linalg.norm(c[:2] - truth[:2]), "now": c[2] - truth[2]}
         row["tri"] = (rays_nearest_point(rays)[2] if len(rays) >= 3 else float("nan")) - truth[2]
         for k, values in est.items():
             row[k] = med(values) - truth[2]
         rows.append(row)
+        if len(rays) >= 3:
+            centroid = np.array(rocks[t["gt_rock_id"]]["centroid"])
+            flown = rays_nearest_point(rays) - truth
+            true = rays_nearest_point(true_rays) - centroid
+            rays_rows.append((flown[2], np.linalg.norm(flown[:2]), true[2], np.linalg.norm(true[:2]), np.linalg.norm(flown)))
 
 print("%-16s rk    h " % "run" + " ".join("%6s" % k for k in KEYS))
 for r in rows:
@@ -106,3 +126,9 @@ for k in KEYS:
         "%6s: |z| median %.2f, 90th percentile %.2f; within 0.5 m in 3D (with the located horizontal) %d / %d"
         % (k, np.median(abs(z[ok])), np.percentile(abs(z[ok]), 90), (np.hypot(h[ok], z[ok]) <= 0.5).sum(), len(rows))
     )
+
+a = np.array(rays_rows)
+print("the rays' nearest point (median, 90th percentile, m):")
+for name, k in [("vertical, frame flown", 0), ("horizontal, frame flown", 1), ("vertical, true poses", 2), ("horizontal, true poses", 3)]:
+    print("  %-24s %.2f %.2f" % (name, np.median(abs(a[:, k])), np.percentile(abs(a[:, k]), 90)))
+print("  within 0.5 m in 3D, frame flown: %d / %d" % ((a[:, 4] <= 0.5).sum(), len(a)))
