@@ -107,11 +107,33 @@ pub struct ScanConfig {
     /// moved only that one, to +2.29°, and 0.02 moved 10, widening one interval to 11°. The
     /// cost is width: on a third campaign's 46 meshes the median interval went 4.18° → 4.50°.
     pub contact_near_m: f64,
-    /// At least this fraction of the sectors must be seen near the support, or the scan is
-    /// refused: a base seen on one side only extrapolates to a contact in the wrong place.
-    /// Default 0.8: in a 3-world × 10-seed campaign, targets whose base was seen in fewer than
-    /// 80% of the directions had a median α error of 5.7°, against 1.2° above.
+    /// At least this fraction of the sectors must be seen near the support for the contact to
+    /// be read from the seen base alone: a base seen on one side only extrapolates to a contact
+    /// in the wrong place. Default 0.8: in a 3-world × 10-seed campaign, targets whose base was
+    /// seen in fewer than 80% of the directions had a median α error of 5.7°, against 1.2°
+    /// above. Between [`ScanConfig::partial_base_min_near_fraction`] and this, the scan is
+    /// analysed only where the unseen directions do not decide α_min
+    /// ([`ScanConfig::max_unseen_base_effect_deg`]); the scan's centroid
+    /// ([`scan_centroid`]) needs this fraction.
     pub profile_min_near_fraction: f64,
+    /// Below this fraction of the sectors seen near the support, the scan is refused outright.
+    /// Default 0.5, half the turn.
+    pub partial_base_min_near_fraction: f64,
+    /// A scan whose base is seen near its support in fewer than
+    /// [`ScanConfig::profile_min_near_fraction`] of the directions is refused when letting the
+    /// unseen directions' contact reach as far as the rock above them raises the median α_min
+    /// reading by more than this, degrees: the part of the base no camera saw then decides
+    /// α_min. Default 1.
+    ///
+    /// Why: library-b's stone tilted 40° at the foot of the scarp (E34) is seen near its
+    /// support in 18–20 of 36 directions, the rest hidden by the slope, and was refused in
+    /// every flight. Its α_min is across its lean, on the seen side. Re-analysed with this
+    /// rule, its 9 distinct mission meshes of sessions 45–49 (the other 7 flights are refused
+    /// for their unseen surface) read 4.57–5.50° against a truth of 5.38°, each inside its
+    /// interval, with an effect of 0.00°. A wedge whose base is hidden on the east half, whose
+    /// α_min is the same all round, is still refused
+    /// (`a_base_seen_from_one_side_is_refused`).
+    pub max_unseen_base_effect_deg: f64,
     /// An independent 95% term of this many degrees on each side of a scan's α_min interval,
     /// for what its other sources do not model (the profile's own noise, the closed scan's
     /// surface bias). Default 1.5. With 1.0, over 94 distinct scans of the three worlds' 11
@@ -209,6 +231,8 @@ impl Default for ScanConfig {
             profile_near_m: 0.05,
             contact_near_m: 0.03,
             profile_min_near_fraction: 0.8,
+            partial_base_min_near_fraction: 0.5,
+            max_unseen_base_effect_deg: 1.0,
             support_min_sectors: 7,
             partial_support_min_sectors: 6,
             max_filled_fraction: 0.4,
@@ -254,6 +278,10 @@ impl ScanConfig {
                 "scan.max_unseen_support_effect_deg",
                 self.max_unseen_support_effect_deg,
             ),
+            (
+                "scan.max_unseen_base_effect_deg",
+                self.max_unseen_base_effect_deg,
+            ),
         ] {
             if !(v.is_finite() && v >= 0.0) {
                 return bad(field, v.to_string(), "must be non-negative and finite");
@@ -280,10 +308,21 @@ impl ScanConfig {
                 "scan.profile_min_near_fraction",
                 self.profile_min_near_fraction,
             ),
+            (
+                "scan.partial_base_min_near_fraction",
+                self.partial_base_min_near_fraction,
+            ),
         ] {
             if !(v.is_finite() && v > 0.0 && v <= 1.0) {
                 return bad(field, v.to_string(), "must be in (0, 1]");
             }
+        }
+        if self.partial_base_min_near_fraction > self.profile_min_near_fraction {
+            return bad(
+                "scan.partial_base_min_near_fraction",
+                self.partial_base_min_near_fraction.to_string(),
+                "must not exceed scan.profile_min_near_fraction",
+            );
         }
         if !(self.profile_last_m.is_finite() && self.profile_last_m > self.profile_first_m) {
             return bad(
@@ -856,6 +895,16 @@ fn sectors_seen_near(radius_m: &[Vec<f64>], config: &ScanConfig) -> usize {
         .count()
 }
 
+/// The refusal of a scan whose base is seen within [`ScanConfig::profile_near_m`] of its support
+/// in only `near` of `sectors` directions.
+fn too_little_base_seen(near: usize, sectors: usize, config: &ScanConfig) -> FragilityError {
+    FragilityError::Degenerate(format!(
+        "the rock's base is seen within {} m of its support in only {near} of {sectors} \
+         directions: too little to extrapolate the contact (map the base from lower views)",
+        config.profile_near_m
+    ))
+}
+
 /// How many of a profile's lowest slabs (those of `config`) are centred within `near_m` of the
 /// plane.
 fn near_slab_count(near_m: f64, config: &ScanConfig) -> usize {
@@ -892,6 +941,9 @@ pub struct BasalProfile {
     /// (`low_reach`), metres; `None` where no underside is seen there. A sector's contact
     /// radius is never wider.
     pub low_reach_m: Vec<Option<f64>>,
+    /// How far from the axis the support is searched ([`ScanConfig::support_radius_m`]),
+    /// metres: the farthest a contact reaches where nothing bounds it.
+    pub support_radius_m: f64,
 }
 
 impl BasalProfile {
@@ -945,13 +997,8 @@ impl BasalProfile {
             }
         }
         let near = sectors_seen_near(&radius_m, config);
-        if (near as f64) < config.profile_min_near_fraction * sectors as f64 {
-            return Err(FragilityError::Degenerate(format!(
-                "the rock's base is seen within {} m of its support in only {near} of \
-                 {sectors} directions: too little to extrapolate the contact (map the base \
-                 from lower views)",
-                config.profile_near_m
-            )));
+        if (near as f64) < config.partial_base_min_near_fraction * sectors as f64 {
+            return Err(too_little_base_seen(near, sectors, config));
         }
         let slab_top_m = (0..slabs)
             .map(|k| config.profile_first_m + (k as f64 + 0.5) * PROFILE_SLAB_M)
@@ -964,6 +1011,7 @@ impl BasalProfile {
             slab_top_m,
             contact_near_slabs: near_slab_count(config.contact_near_m, config),
             low_reach_m: vec![None; sectors],
+            support_radius_m: config.support_radius_m,
         })
     }
 
@@ -972,6 +1020,17 @@ impl BasalProfile {
     /// refuses a profile with too few.
     pub fn sectors_seen_near(&self, config: &ScanConfig) -> usize {
         sectors_seen_near(&self.radius_m, config)
+    }
+
+    /// `Ok` when the base is seen near the support in at least
+    /// [`ScanConfig::profile_min_near_fraction`] of the directions, else the refusal naming
+    /// how many (`config` must be the one the profile was measured with).
+    pub fn check_seen_all_round(&self, config: &ScanConfig) -> Result<(), FragilityError> {
+        let (near, sectors) = (self.sectors_seen_near(config), self.radius_m.len());
+        if (near as f64) < config.profile_min_near_fraction * sectors as f64 {
+            return Err(too_little_base_seen(near, sectors, config));
+        }
+        Ok(())
     }
 
     /// The contact polygon under `hypothesis`: in each sector, the radius fitted over the
@@ -985,13 +1044,35 @@ impl BasalProfile {
         &self,
         hypothesis: &ContactHypothesis,
     ) -> Result<Vec<Point2<f64>>, FragilityError> {
+        self.contact_with(hypothesis, UnseenSectors::Spanned)
+    }
+
+    /// How many sectors give [`Self::contact`] no point of their own: their base was not seen
+    /// within [`ScanConfig::contact_near_m`] of the plane.
+    pub fn sectors_unseen_near_contact(&self) -> usize {
+        self.radius_m
+            .iter()
+            .filter(|by_slab| !is_seen_near(by_slab, self.contact_near_slabs))
+            .count()
+    }
+
+    /// [`Self::contact`], with the sectors not seen near the plane filled as `unseen` says.
+    ///
+    /// # Errors
+    /// As [`Self::contact`].
+    pub fn contact_with(
+        &self,
+        hypothesis: &ContactHypothesis,
+        unseen: UnseenSectors,
+    ) -> Result<Vec<Point2<f64>>, FragilityError> {
         let sectors = self.radius_m.len();
         let mut contact = Vec::with_capacity(sectors);
-        for ((by_slab, azimuths), &low_reach) in self
+        for (sector, ((by_slab, azimuths), &low_reach)) in self
             .radius_m
             .iter()
             .zip(&self.azimuth_rad)
             .zip(&self.low_reach_m)
+            .enumerate()
         {
             // A sector whose base no camera saw near the plane is left to the hull of its
             // neighbours: what it measured higher up may be an overhang's underside, not the
@@ -999,6 +1080,9 @@ impl BasalProfile {
             // measured from 4.5 and 7 cm up, read 69–74 cm where the base is 16–22 cm, and
             // α_min came out 14.4° against 8.9°). See [`ScanConfig::contact_near_m`].
             if !is_seen_near(by_slab, self.contact_near_slabs) {
+                if unseen == UnseenSectors::Reaching {
+                    contact.push(self.farthest_unseen_reach(sector, by_slab, azimuths));
+                }
                 continue;
             }
             // (slab top, radius, azimuth) of the slabs fitted.
@@ -1041,6 +1125,44 @@ impl BasalProfile {
         }
         Ok(hull)
     }
+
+    /// The farthest a contact can reach in a sector whose base was not seen near the plane
+    /// ([`UnseenSectors::Reaching`]): the narrowest slab measured above it, along that slab's
+    /// azimuth (a rock standing on a base narrower than itself is no wider at its contact
+    /// than anywhere above); the whole support radius along the sector's middle where no slab
+    /// was measured. The support's outline clips it ([`ClosedScan::contact_under_with`]).
+    fn farthest_unseen_reach(
+        &self,
+        sector: usize,
+        by_slab: &[f64],
+        azimuths: &[f64],
+    ) -> Point2<f64> {
+        let (radius_m, azimuth) = by_slab
+            .iter()
+            .zip(azimuths)
+            .filter(|(r, _)| **r > 0.0)
+            .min_by(|a, b| a.0.total_cmp(b.0))
+            .map_or(
+                (
+                    self.support_radius_m,
+                    sector_middle_rad(sector, self.radius_m.len()),
+                ),
+                |(r, a)| (*r, *a),
+            );
+        self.axis_xy + radius_m * nalgebra::Vector2::new(azimuth.cos(), azimuth.sin())
+    }
+}
+
+/// How a contact reading fills the profile's sectors whose base was not seen near the support
+/// ([`ScanConfig::contact_near_m`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum UnseenSectors {
+    /// Spanned by the hull of the seen sectors' contact points: the least contact the seen
+    /// base allows, and the point estimate's reading.
+    Spanned,
+    /// Reaching as far as the rock could stand there ([`BasalProfile::contact_with`]): the
+    /// most contact, which bounds α_min from above.
+    Reaching,
 }
 
 /// Heights above the support plane, metres, at which [`low_reach`] cuts the scan: from
@@ -1615,7 +1737,8 @@ pub fn scan_centroid(
         contact_height_m,
         ..
     } = cut_rock(mesh, config)?;
-    BasalProfile::measure(&rock.positions, contact_height_m, config)?;
+    BasalProfile::measure(&rock.positions, contact_height_m, config)?
+        .check_seen_all_round(config)?;
     fill_holes(&mut rock);
     rock.volume_properties()
         .map(|v| v.centroid)
@@ -1867,9 +1990,22 @@ impl ClosedScan {
         &self,
         hypothesis: &ContactHypothesis,
     ) -> Result<Vec<[f64; 3]>, FragilityError> {
+        self.contact_under_with(hypothesis, UnseenSectors::Spanned)
+    }
+
+    /// [`Self::contact_under`] with the profile's sectors not seen near the support filled as
+    /// `unseen` says ([`BasalProfile::contact_with`]).
+    ///
+    /// # Errors
+    /// Those of [`BasalProfile::contact`].
+    pub fn contact_under_with(
+        &self,
+        hypothesis: &ContactHypothesis,
+        unseen: UnseenSectors,
+    ) -> Result<Vec<[f64; 3]>, FragilityError> {
         let z = self.profile.plane_z + hypothesis.plane_offset_m;
         Ok(clipped_by(
-            self.profile.contact(hypothesis)?,
+            self.profile.contact_with(hypothesis, unseen)?,
             self.support_outline.as_ref(),
             hypothesis.gaps,
         )
@@ -1914,6 +2050,10 @@ pub fn analyze_scan(
 /// - `profile_model`: the spread of the readings at the measured plane;
 /// - `unseen_support_edge`: the outline's unseen sectors opened ([`OutlineGaps::Open`]), when
 ///   there are any;
+/// - `unseen_base`: above only, the profile's sectors whose base was not seen near the support
+///   reaching as far as the rock above them ([`UnseenSectors::Reaching`]), when there are any;
+///   where the base is seen in fewer than [`ScanConfig::profile_min_near_fraction`] of the
+///   directions, an effect over [`ScanConfig::max_unseen_base_effect_deg`] refuses the scan;
 /// - `contact_edge`: the contact shrunk by [`ScanConfig::contact_edge_m`];
 /// - `unseen_shape`: the centre of mass moved by the unseen patches' bulge
 ///   ([`ClosedScan::unseen_shape_alpha_spread_deg`], [`ScanConfig::unseen_bulge_ratio`]);
@@ -2034,6 +2174,41 @@ pub fn analyze_closed_scan(
             point - shrunk_contact_alpha_deg(point, com_height_m, config.scan.contact_edge_m),
             0.0,
         ));
+    }
+    if closed.profile.sectors_unseen_near_contact() > 0 {
+        // The median of the point estimate's readings again, each with the unseen sectors
+        // reaching as far as the rock could stand there: the base no camera saw can only
+        // widen the contact the seen sectors span.
+        let mut reaching: Vec<f64> = hypotheses
+            .iter()
+            .zip(&readings)
+            .filter(|(h, r)| {
+                h.gaps == OutlineGaps::Interpolated && h.model == MEDIAN_MODEL && r.is_some()
+            })
+            .filter_map(|(h, _)| {
+                let contact = closed.contact_under_with(h, UnseenSectors::Reaching).ok()?;
+                let polygon = closed.landed_on(&contact, &underside, &com, h.gaps);
+                first.alpha_min_on_contact(&polygon)
+            })
+            .collect();
+        reaching.sort_by(f64::total_cmp);
+        if let Some(&reaching) = reaching.get(reaching.len().saturating_sub(1) / 2) {
+            let effect = (reaching - point).max(0.0);
+            if effect > config.scan.max_unseen_base_effect_deg
+                && closed.profile.check_seen_all_round(&config.scan).is_err()
+            {
+                return Err(FragilityError::Degenerate(format!(
+                    "the rock's base is seen within {} m of its support in only {} of {} \
+                     directions, and where it is not seen it decides α_min ({point:.1}° with \
+                     those directions spanned by the seen ones, {reaching:.1}° with the base \
+                     reaching as far as the rock above them): map the base from lower views",
+                    config.scan.profile_near_m,
+                    closed.profile.sectors_seen_near(&config.scan),
+                    closed.profile.radius_m.len()
+                )));
+            }
+            sources.push(IntervalSource::new("unseen_base", 0.0, effect));
+        }
     }
     let (below, above) =
         closed.unseen_shape_alpha_spread_deg(&analysis, median, config.scan.unseen_bulge_ratio);
@@ -2868,21 +3043,48 @@ mod tests {
         assert!(error.contains("the contact is hidden"), "{error}");
     }
 
-    #[test]
-    fn a_base_seen_from_one_side_is_refused() {
-        // Remove the rock's lowest 7 cm on the east half: the wedge is seen from the west only.
-        let (mut scan, _) = wedge_scan();
+    /// `scan` without its lowest 7 cm above the support (at z = 1) within `half_angle_deg` of
+    /// east: no camera saw the base there.
+    fn base_hidden_east(mut scan: TriangleMesh, half_angle_deg: f64) -> TriangleMesh {
         let positions = scan.positions.clone();
         scan.faces.retain(|f| {
             let centre = f.iter().fold(nalgebra::Vector3::zeros(), |acc, &v| {
                 acc + positions[v as usize].coords.cast::<f64>()
             }) / 3.0;
-            !(centre.z > 1.005 && centre.z < 1.07 && centre.x > 0.0)
+            let east = centre.y.atan2(centre.x).abs() < half_angle_deg.to_radians();
+            !(centre.z > 1.005 && centre.z < 1.07 && east)
         });
+        scan
+    }
+
+    /// `mesh` leaning west: every point above z = 1.05 moved west by `lean_m` per 1.4 m up.
+    fn leaning_west(mut mesh: TriangleMesh, lean_m: f64) -> TriangleMesh {
+        for p in &mut mesh.positions {
+            let above = f64::from(p.z) - 1.05;
+            if above > 0.0 {
+                p.x -= (lean_m * above / 1.4) as f32;
+            }
+        }
+        mesh
+    }
+
+    #[test]
+    fn a_base_seen_from_one_side_is_refused() {
+        // The lowest 7 cm removed within 110° of east: the wedge is seen from the west only,
+        // in fewer than half the directions.
+        let scan = base_hidden_east(wedge_scan().0, 110.0);
         let error = close_scan(&scan, &ScanConfig::default())
             .unwrap_err()
             .to_string();
         assert!(error.contains("directions"), "{error}");
+        // A third of the turn hidden: the contact can be read from the rest, but the wedge's
+        // α_min is the same all round, so the part no camera saw decides it.
+        let scan = base_hidden_east(wedge_scan().0, 60.0);
+        close_scan(&scan, &ScanConfig::default()).unwrap();
+        let error = analyze_scan(&scan, &FragilityConfig::default())
+            .unwrap_err()
+            .to_string();
+        assert!(error.contains("decides α_min"), "{error}");
         // Nor does the scan place the rock: its cut is not known to be at its base.
         let error = scan_centroid(&scan, &ScanConfig::default()).unwrap_err();
         assert!(error.to_string().contains("directions"), "{error}");
@@ -2894,6 +3096,46 @@ mod tests {
             (centroid - true_centroid).norm() < 0.02,
             "{centroid} against {true_centroid}"
         );
+    }
+
+    #[test]
+    fn a_base_hidden_away_from_the_lean_is_read_from_the_seen_side() {
+        // The wedge leaning 0.3 m west, its base hidden within 60° of east: α_min is across the
+        // lean, where the base was seen, and the hidden third cannot lower it.
+        let (scan, truth) = wedge_scan();
+        let scan = base_hidden_east(leaning_west(scan, 0.3), 60.0);
+        let config = FragilityConfig::default();
+        let truth = analyze(&leaning_west(truth, 0.3), ContactSpec::Auto, &config).unwrap();
+        let (closed, analysis) = analyze_scan(&scan, &config).unwrap();
+        let near = closed.profile.sectors_seen_near(&config.scan);
+        assert!((18..29).contains(&near), "seen near in {near} of 36");
+        let r = &analysis.report;
+        assert!(
+            (r.alpha_min_deg - truth.alpha_min_deg).abs() < 1.0,
+            "{} against {}",
+            r.alpha_min_deg,
+            truth.alpha_min_deg
+        );
+        assert!(
+            (r.alpha_min_low_deg..=r.alpha_min_high_deg).contains(&truth.alpha_min_deg),
+            "truth {} outside [{}, {}]",
+            truth.alpha_min_deg,
+            r.alpha_min_low_deg,
+            r.alpha_min_high_deg
+        );
+        assert!(
+            r.alpha_interval
+                .sources
+                .iter()
+                .any(|s| s.name == "unseen_base"),
+            "{:?}",
+            r.alpha_interval.sources
+        );
+        // Refused with the old rule, which asked for 80% of the directions whatever they decide.
+        let mut strict = config.clone();
+        strict.scan.partial_base_min_near_fraction = strict.scan.profile_min_near_fraction;
+        let error = analyze_scan(&scan, &strict).unwrap_err().to_string();
+        assert!(error.contains("directions"), "{error}");
     }
 
     /// The perimeter of the rectangle |x| ≤ `half_x`, |y| ≤ `half_y`, counter-clockwise, with
@@ -3172,6 +3414,7 @@ mod tests {
             slab_top_m: slab_top_m.clone(),
             contact_near_slabs: near_slab_count(contact_near_m, &config),
             low_reach_m: vec![None; sectors],
+            support_radius_m: config.support_radius_m,
         };
         let reach_m = |contact_near_m: f64| {
             profile(contact_near_m)
