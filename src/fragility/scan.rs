@@ -57,6 +57,13 @@ const SHOULDER_JUMP: f64 = 3.0;
 /// How far below the scan's top a shoulder may first be taken, metres: the top's own sections
 /// grow from nothing and may triple from one step to the next.
 const SHOULDER_MIN_DEPTH_M: f64 = 0.1;
+/// A shoulder is read only against a slab at most this far above, metres: across a stretch of
+/// slabs that do not surround their mean (seen from one side) the rock may widen any amount.
+/// On default seed 68's rock 2, a round rock whose body was seen from one side from 2 to 57 cm
+/// under its top, the body's first full section (1.35 m²) was read as a pedestal's top under
+/// the top cap's (0.12 m²), the neck was put 4 cm under the top, and nothing was left above the
+/// cut.
+const SHOULDER_MAX_GAP_M: f64 = 3.0 * STEP_M;
 
 /// Settings of the scan closing and contact extrapolation ([`close_scan`]). Every field has a
 /// documented default; they are the `[scan]` table of a fragility config file.
@@ -1414,8 +1421,9 @@ fn find_neck(
         if let Some((extent, mean)) = slab_extent(mesh, z) {
             match narrowest {
                 None => {
-                    if let Some(shoulder) = above.filter(|&(_, above_extent, _)| {
+                    if let Some(shoulder) = above.filter(|&(above_z, above_extent, _)| {
                         z <= z_hi - SHOULDER_MIN_DEPTH_M
+                            && above_z - z <= SHOULDER_MAX_GAP_M + 1e-9
                             && extent > SHOULDER_JUMP * above_extent
                             && extent > WIDENING * widest
                     }) {
@@ -2282,17 +2290,22 @@ mod tests {
     /// A round rock (0.84 m across, 0.8 m tall) on a narrow neck (0.28 m) on a wide pedestal, as
     /// one open surface: no bottom, like a scan.
     fn open_scan() -> TriangleMesh {
-        // (z, radius) keys of a 32-gon section, sampled every centimetre like a scan.
-        let keys = [
+        keyed_scan(&[
             (0.0, 0.8),
             (0.5, 0.6),
             (0.9, 0.14),
             (1.0, 0.14),
             (1.02, 0.42),
             (1.8, 0.42),
-        ];
+        ])
+    }
+
+    /// An open scan of revolution through `keys` ((z, radius), z rising from 0 to 1.8 m): a
+    /// 32-gon section sampled every centimetre like a scan, linear between the keys.
+    fn keyed_scan(keys: &[(f64, f64)]) -> TriangleMesh {
+        let last = &keys[keys.len() - 2..];
         let radius_at = |z: f64| {
-            let k = keys.windows(2).find(|w| z <= w[1].0).unwrap_or(&keys[4..6]);
+            let k = keys.windows(2).find(|w| z <= w[1].0).unwrap_or(last);
             let t = ((z - k[0].0) / (k[1].0 - k[0].0)).clamp(0.0, 1.0);
             k[0].1 + t * (k[1].1 - k[0].1)
         };
@@ -2413,6 +2426,45 @@ mod tests {
         let report = analyze(&closed.mesh, ContactSpec::Auto, &FragilityConfig::default()).unwrap();
         assert!(report.volume_m3 > 0.2, "volume {}", report.volume_m3);
         assert!(report.alpha_min_deg > 0.0 && report.alpha_min_deg < 30.0);
+    }
+
+    #[test]
+    fn a_rock_seen_from_one_side_below_its_top_keeps_its_neck() {
+        // A column on a neck over a conical pedestal, with a domed top; its side seen from the
+        // west only from 5 cm under the top down to 1.1 m, so those sections do not surround
+        // their mean. The column's first full section, 0.55 m² under the top's 0.05 m², is not a
+        // pedestal's top: the neck stays at 0.9–1.0 m.
+        let full = keyed_scan(&[
+            (0.0, 0.8),
+            (0.5, 0.6),
+            (0.9, 0.14),
+            (1.0, 0.14),
+            (1.02, 0.42),
+            (1.5, 0.42),
+            (1.8, 0.1),
+        ]);
+        let unseen = |p: &Point3<f32>| p.x > 0.0 && p.z > 1.1 && p.z < 1.75;
+        let mut kept = vec![None; full.positions.len()];
+        let mut scan = TriangleMesh::default();
+        for (i, p) in full.positions.iter().enumerate() {
+            if !unseen(p) {
+                kept[i] = Some(scan.positions.len() as u32);
+                scan.positions.push(*p);
+            }
+        }
+        scan.faces = full
+            .faces
+            .iter()
+            .filter_map(|f| {
+                Some([
+                    kept[f[0] as usize]?,
+                    kept[f[1] as usize]?,
+                    kept[f[2] as usize]?,
+                ])
+            })
+            .collect();
+        let neck = find_scan_neck(&scan, &ScanConfig::default()).unwrap();
+        assert!((0.9..=1.03).contains(&neck), "neck at {neck}");
     }
 
     /// The open scan's pedestal is a cone with no flat top: no support plane, so its contact
