@@ -134,10 +134,10 @@ pub struct ScanConfig {
     ///
     /// Why: library-b's stone tilted 40° at the foot of the scarp (E34) is seen near its
     /// support in 18–20 of 36 directions, the rest hidden by the slope, and was refused in
-    /// every flight. Its α_min is across its lean, on the seen side. Re-analysed with this
-    /// rule, its 9 distinct mission meshes of sessions 45–49 (the other 7 flights are refused
-    /// for their unseen surface) read 4.57–5.50° against a truth of 5.38°, each inside its
-    /// interval, with an effect of 0.00°. A wedge whose base is hidden on the east half, whose
+    /// every flight of sessions 45–49's campaigns. Its α_min is across its lean, on the seen
+    /// side. Re-analysed with this rule, 9 of its distinct flights' meshes read 4.57–5.50°
+    /// against a truth of 5.38°, each inside its interval, with an effect of 0.00° (the
+    /// others are refused for other reasons, most for more than 40% of the rock patched). A wedge whose base is hidden on the east half, whose
     /// α_min is the same all round, is still refused
     /// (`a_base_seen_from_one_side_is_refused`).
     pub max_unseen_base_effect_deg: f64,
