@@ -137,9 +137,9 @@ pub struct ScanConfig {
     /// every flight of sessions 45–49's campaigns. Its α_min is across its lean, on the seen
     /// side. Re-analysed with this rule, 9 of its distinct flights' meshes read 4.57–5.50°
     /// against a truth of 5.38°, each inside its interval, with an effect of 0.00° (the
-    /// others are refused for other reasons, most for more than 40% of the rock patched). A wedge whose base is hidden on the east half, whose
-    /// α_min is the same all round, is still refused
-    /// (`a_base_seen_from_one_side_is_refused`).
+    /// others are refused for other reasons, most for more than 40% of the rock patched). A
+    /// wedge whose α_min is the same all round, its base hidden over a third of the turn, is
+    /// still refused (`a_base_seen_from_one_side_is_refused`).
     pub max_unseen_base_effect_deg: f64,
     /// An independent 95% term of this many degrees on each side of a scan's α_min interval,
     /// for what its other sources do not model (the profile's own noise, the closed scan's
@@ -902,13 +902,22 @@ fn sectors_seen_near(radius_m: &[Vec<f64>], config: &ScanConfig) -> usize {
         .count()
 }
 
-/// The refusal of a scan whose base is seen within [`ScanConfig::profile_near_m`] of its support
-/// in only `near` of `sectors` directions.
+/// How a refusal names a base seen within [`ScanConfig::profile_near_m`] of its support in only
+/// `near` of `sectors` directions.
+fn base_seen_in(near: usize, sectors: usize, config: &ScanConfig) -> String {
+    format!(
+        "the rock's base is seen within {} m of its support in only {near} of {sectors} \
+         directions",
+        config.profile_near_m
+    )
+}
+
+/// The refusal of a scan whose base is seen near its support in too few directions to read the
+/// contact from at all ([`base_seen_in`]).
 fn too_little_base_seen(near: usize, sectors: usize, config: &ScanConfig) -> FragilityError {
     FragilityError::Degenerate(format!(
-        "the rock's base is seen within {} m of its support in only {near} of {sectors} \
-         directions: too little to extrapolate the contact (map the base from lower views)",
-        config.profile_near_m
+        "{}: too little to extrapolate the contact (map the base from lower views)",
+        base_seen_in(near, sectors, config)
     ))
 }
 
@@ -1029,15 +1038,25 @@ impl BasalProfile {
         sectors_seen_near(&self.radius_m, config)
     }
 
-    /// `Ok` when the base is seen near the support in at least
-    /// [`ScanConfig::profile_min_near_fraction`] of the directions, else the refusal naming
-    /// how many (`config` must be the one the profile was measured with).
+    /// Whether the base is seen near the support in at least
+    /// [`ScanConfig::profile_min_near_fraction`] of the directions (`config` must be the one
+    /// the profile was measured with).
+    pub fn is_seen_all_round(&self, config: &ScanConfig) -> bool {
+        self.sectors_seen_near(config) as f64
+            >= config.profile_min_near_fraction * self.radius_m.len() as f64
+    }
+
+    /// `Ok` when [`Self::is_seen_all_round`], else the refusal naming how many directions
+    /// the base is seen in.
     pub fn check_seen_all_round(&self, config: &ScanConfig) -> Result<(), FragilityError> {
-        let (near, sectors) = (self.sectors_seen_near(config), self.radius_m.len());
-        if (near as f64) < config.profile_min_near_fraction * sectors as f64 {
-            return Err(too_little_base_seen(near, sectors, config));
+        if self.is_seen_all_round(config) {
+            return Ok(());
         }
-        Ok(())
+        Err(too_little_base_seen(
+            self.sectors_seen_near(config),
+            self.radius_m.len(),
+            config,
+        ))
     }
 
     /// The contact polygon under `hypothesis`: in each sector, the radius fitted over the
@@ -2203,16 +2222,17 @@ pub fn analyze_closed_scan(
         if let Some(&reaching) = reaching.get(reaching.len().saturating_sub(1) / 2) {
             let effect = (reaching - point).max(0.0);
             if effect > config.scan.max_unseen_base_effect_deg
-                && closed.profile.check_seen_all_round(&config.scan).is_err()
+                && !closed.profile.is_seen_all_round(&config.scan)
             {
-                return Err(FragilityError::Degenerate(format!(
-                    "the rock's base is seen within {} m of its support in only {} of {} \
-                     directions, and where it is not seen it decides α_min ({point:.1}° with \
-                     those directions spanned by the seen ones, {reaching:.1}° with the base \
-                     reaching as far as the rock above them): map the base from lower views",
-                    config.scan.profile_near_m,
+                let seen = base_seen_in(
                     closed.profile.sectors_seen_near(&config.scan),
-                    closed.profile.radius_m.len()
+                    closed.profile.radius_m.len(),
+                    &config.scan,
+                );
+                return Err(FragilityError::Degenerate(format!(
+                    "{seen}, and where it is not seen it decides α_min ({point:.1}° with those \
+                     directions spanned by the seen ones, {reaching:.1}° with the base reaching \
+                     as far as the rock above them): map the base from lower views"
                 )));
             }
             sources.push(IntervalSource::new("unseen_base", 0.0, effect));
@@ -2443,26 +2463,14 @@ mod tests {
             (1.5, 0.42),
             (1.8, 0.1),
         ]);
-        let unseen = |p: &Point3<f32>| p.x > 0.0 && p.z > 1.1 && p.z < 1.75;
-        let mut kept = vec![None; full.positions.len()];
-        let mut scan = TriangleMesh::default();
-        for (i, p) in full.positions.iter().enumerate() {
-            if !unseen(p) {
-                kept[i] = Some(scan.positions.len() as u32);
-                scan.positions.push(*p);
-            }
-        }
-        scan.faces = full
-            .faces
-            .iter()
-            .filter_map(|f| {
-                Some([
-                    kept[f[0] as usize]?,
-                    kept[f[1] as usize]?,
-                    kept[f[2] as usize]?,
-                ])
-            })
-            .collect();
+        let unseen = |v: u32| {
+            let p = full.positions[v as usize];
+            p.x > 0.0 && p.z > 1.1 && p.z < 1.75
+        };
+        // The slab extents read vertices, so the unseen ones go with their faces.
+        let mut seen = full.clone();
+        seen.faces.retain(|f| !f.iter().any(|&v| unseen(v)));
+        let scan = scarp_slam::meshing::remove_small_components(&seen, 0);
         let neck = find_scan_neck(&scan, &ScanConfig::default()).unwrap();
         assert!((0.9..=1.03).contains(&neck), "neck at {neck}");
     }
