@@ -1671,6 +1671,51 @@ fn fan(mesh: &mut TriangleMesh, chain: &[u32]) -> Option<FilledPatch> {
     Some(patch)
 }
 
+/// The patches that close a cut rock and the areas on either side of them.
+struct Closing {
+    filled_patches: Vec<FilledPatch>,
+    /// The scanned surface's area before the patches, square metres.
+    scanned_area_m2: f64,
+    /// The patches' area (over unseen parts and the cut), square metres.
+    filled_area_m2: f64,
+}
+
+impl Closing {
+    /// Closes `rock` by [`fill_holes`] and measures what the patches added.
+    fn of(rock: &mut TriangleMesh) -> Self {
+        let scanned_area_m2 = rock.surface_area();
+        let filled_patches = fill_holes(rock);
+        Self {
+            filled_patches,
+            scanned_area_m2,
+            filled_area_m2: rock.surface_area() - scanned_area_m2,
+        }
+    }
+
+    /// The patches' share of the closed surface (0 for a surface with no area).
+    fn filled_fraction(&self) -> f64 {
+        let total = self.filled_area_m2 + self.scanned_area_m2;
+        if total > 0.0 {
+            self.filled_area_m2 / total
+        } else {
+            0.0
+        }
+    }
+}
+
+/// The share of a scanned rock's closed surface that patches parts no camera saw and its cut,
+/// as [`close_scan`] measures it before refusing above [`ScanConfig::max_filled_fraction`]:
+/// the scan cut off above its support and closed, without reading its contact. A mapping
+/// flight reads it on the map it holds so far, to fly on while too much of the rock is unseen
+/// (`coverage.max_patched_fraction`). The scan is z-up, metres, in any frame.
+///
+/// # Errors
+/// Those of the cut: an invalid `config`, no neck, or nothing above the cut.
+pub fn patched_fraction(mesh: &TriangleMesh, config: &ScanConfig) -> Result<f64, FragilityError> {
+    let CutRock { mut rock, .. } = cut_rock(mesh, config)?;
+    Ok(Closing::of(&mut rock).filled_fraction())
+}
+
 /// The scanned rock cut off above its support, before closing: the largest manifold
 /// component of the scan above the cut (the support plane plus
 /// [`ScanConfig::cut_above_support_m`], or the neck where no plane was found), its vertices
@@ -1821,11 +1866,14 @@ pub fn close_scan(mesh: &TriangleMesh, config: &ScanConfig) -> Result<ClosedScan
         .iter()
         .map(|p| [p.x, p.y, contact_height_m])
         .collect();
-    let scanned_area_m2 = rock.surface_area();
     let scanned_vertex_count = rock.positions.len();
-    let filled_patches = fill_holes(&mut rock);
-    let filled_area_m2 = rock.surface_area() - scanned_area_m2;
-    let filled_fraction = filled_area_m2 / (filled_area_m2 + scanned_area_m2);
+    let closing = Closing::of(&mut rock);
+    let filled_fraction = closing.filled_fraction();
+    let Closing {
+        filled_patches,
+        scanned_area_m2,
+        filled_area_m2,
+    } = closing;
     if filled_fraction > config.max_filled_fraction {
         return Err(FragilityError::Degenerate(format!(
             "{:.0}% of the closed rock's surface patches parts no camera saw (more than {:.0}%): \
@@ -2353,6 +2401,46 @@ mod tests {
         mesh.faces
             .retain(|f| f.iter().any(|&v| mesh.positions[v as usize].z > 1e-6));
         mesh
+    }
+
+    /// The share a mapping flight reads is the one the analysis refuses on: the same cut and
+    /// the same patches. A rock seen all round is patched only at its cut; with its upper
+    /// half's east side never seen, over a third of it is patched.
+    #[test]
+    fn the_patched_share_is_what_closing_measures() {
+        let config = ScanConfig::default();
+        let seen = open_scan();
+        let share = patched_fraction(&seen, &config).unwrap();
+        let closed = close_scan(&seen, &config).unwrap();
+        let closed_share = closed.filled_area_m2 / (closed.filled_area_m2 + closed.scanned_area_m2);
+        assert!(
+            (share - closed_share).abs() < 1e-12,
+            "{share} {closed_share}"
+        );
+        // The cut at the 0.28 m neck against a rock 0.84 m across.
+        assert!(share < 0.05, "{share}");
+
+        let mut hidden = open_scan();
+        let positions = hidden.positions.clone();
+        hidden.faces.retain(|f| {
+            let centre = f.iter().fold(nalgebra::Vector3::zeros(), |acc, &v| {
+                acc + positions[v as usize].coords.cast::<f64>()
+            }) / 3.0;
+            !(centre.z > 1.1 && centre.x > 0.0)
+        });
+        let share = patched_fraction(&hidden, &config).unwrap();
+        assert!((0.25..0.5).contains(&share), "{share}");
+        let strict = ScanConfig {
+            max_filled_fraction: share - 0.01,
+            ..config
+        };
+        let error = close_scan(&hidden, &strict).unwrap_err().to_string();
+        assert!(error.contains("patches parts no camera saw"), "{error}");
+        let lenient = ScanConfig {
+            max_filled_fraction: share + 0.01,
+            ..config
+        };
+        assert!(close_scan(&hidden, &lenient).is_ok());
     }
 
     /// A contact inside the scan passes; one that reaches the mapped region's edge (the ground

@@ -192,6 +192,12 @@ impl MissionConfig {
                 self.coverage.min_sweep_deg
             ));
         }
+        if !(0.0..=1.0).contains(&self.coverage.max_patched_fraction) {
+            return Err(format!(
+                "`coverage.max_patched_fraction` = {}: must lie in [0, 1]",
+                self.coverage.max_patched_fraction
+            ));
+        }
         Ok(())
     }
 }

@@ -37,7 +37,7 @@ use crate::evaluation::mesh::{MeshEvalConfig, MeshEvaluation, Visibility, evalua
 use crate::evaluation::trajectory::{
     Alignment, TrajectoryEvalConfig, evaluate_trajectory, umeyama,
 };
-use crate::fragility::scan::{analyze_closed_scan, close_scan, scan_centroid};
+use crate::fragility::scan::{analyze_closed_scan, close_scan, patched_fraction, scan_centroid};
 use crate::fragility::{ContactSpec, analyze};
 use crate::localization::silhouette::center_in_box;
 
@@ -79,6 +79,9 @@ pub struct MappingSession {
     frames_dropped: usize,
     /// Frames after a gap in view tracked from a search over the estimate's walk.
     reacquisitions: usize,
+    /// `frames_mapped` when the map's patched share was last read, and that share (`None`
+    /// where the map could not be cut), for [`Self::ends_mapping`].
+    patched_check: Option<(usize, Option<f64>)>,
 }
 
 /// Frames tried to see the target in before its map starts where the localization put it
@@ -404,6 +407,7 @@ impl MappingSession {
             navigation_error_m: None,
             frames_dropped: 0,
             reacquisitions: 0,
+            patched_check: None,
         })
     }
 
@@ -474,6 +478,52 @@ impl MappingSession {
     /// Coverage of the cylinder so far.
     pub fn coverage(&self) -> &CylinderCoverage {
         &self.coverage
+    }
+
+    /// Whether mapping may stop flying: the coverage's cells would end it
+    /// ([`CylinderCoverage::ends_mapping`]) and the rock in the map so far is patched over no
+    /// more than `coverage.max_patched_fraction` of its closed surface. The share is read
+    /// (the tracking volume meshed, cut and closed) at most every
+    /// `coverage.patched_check_every_frames` mapped frames, and only once the cells are done.
+    /// A map that cannot be cut yet (no neck, nothing above it) does not hold the flight: the
+    /// analysis will say why.
+    pub fn ends_mapping(&mut self, config: &MissionConfig) -> bool {
+        let coverage = &config.coverage;
+        if !self.coverage.ends_mapping() {
+            return false;
+        }
+        if coverage.max_patched_fraction >= 1.0 {
+            return true;
+        }
+        let due = self.patched_check.is_none_or(|(at, _)| {
+            self.frames_mapped >= at + coverage.patched_check_every_frames.max(1)
+        });
+        if due {
+            let mesh = extract_mesh(
+                self.tracker.volume(),
+                &MeshingConfig {
+                    min_component_triangles: config.mapping.min_component_triangles,
+                    ..config.mapping.refine.meshing
+                },
+            );
+            let share = patched_fraction(&mesh, &config.fragility.scan).ok();
+            tracing::debug!(
+                "target {}: {} frames mapped, the map's rock patched over {}",
+                self.target_id,
+                self.frames_mapped,
+                share.map_or("? (not cut)".to_string(), |s| format!("{:.0}%", 100.0 * s))
+            );
+            self.patched_check = Some((self.frames_mapped, share));
+        }
+        self.patched_check
+            .and_then(|(_, share)| share)
+            .is_none_or(|share| share <= coverage.max_patched_fraction)
+    }
+
+    /// The rock's patched share at the last reading by [`Self::ends_mapping`] (`None` before
+    /// one, or where the map could not be cut).
+    pub fn last_patched_fraction(&self) -> Option<f64> {
+        self.patched_check.and_then(|(_, share)| share)
     }
 
     /// Maps one frame when its view meets the region of interest: tracks it against the model,
@@ -732,6 +782,7 @@ pub fn finish_target(
     report.base_coverage = session.coverage.bottom_fraction();
     report.sweep_deg = session.coverage.sweep_deg();
     report.largest_unseen_region_cells = session.coverage.largest_unseen_region_cells();
+    report.map_patched_fraction = session.last_patched_fraction();
     report.keyframes = session.stored.len();
     let shortfall = session.coverage.shortfall();
     let stored = session.stored;
@@ -1165,6 +1216,60 @@ mod tests {
             }
         }
         eprintln!("worst centre error {worst_m:.2} m");
+    }
+
+    /// The cells of a loose coverage end mapping after a few frames; the rock's patched share
+    /// keeps it flying while the map holds one side of the rock only, and lets it end once the
+    /// ring has gone round.
+    #[test]
+    fn mapping_flies_on_while_the_rock_in_the_map_is_mostly_unseen() {
+        use scarp_datasets::world::RockRole;
+        let world = World::builtin_default().unwrap();
+        let rock = world
+            .rocks
+            .iter()
+            .find(|r| r.role == RockRole::Target)
+            .unwrap();
+        let mut config = MissionConfig::default();
+        config.coverage.threshold = 0.05;
+        config.coverage.max_unseen_region_cells = 0;
+        config.coverage.top_cells = 0;
+        config.coverage.patched_check_every_frames = 1;
+        let camera = PinholeCamera::from_hfov(160, 120, 87.0).unwrap();
+        let cylinder = rock_cylinder(&world, rock, &Vector3::zeros(), &config.cylinder).unwrap();
+        let mut session = MappingSession::new(1, &cylinder, &camera, &config).unwrap();
+        let renderer = scarp_datasets::render::Renderer::new(&world);
+        let centre = rock.centroid;
+        let view = |session: &mut MappingSession, deg: f64| {
+            let azimuth = deg.to_radians();
+            let out_m = cylinder.radius_m + 1.5;
+            let eye = centre + Vector3::new(out_m * azimuth.cos(), out_m * azimuth.sin(), 1.0);
+            let pose = scarp_slam::geometry::look_at(&eye, &centre, &Vector3::z()).unwrap();
+            let rendered = renderer.render(&camera, &pose).unwrap();
+            let frame = RgbdFrame::new(deg / 10.0, rendered.rgb, rendered.depth_m, None).unwrap();
+            session.process(frame, &pose, Some(&pose)).unwrap();
+        };
+        for step in 0..=12 {
+            view(&mut session, f64::from(step) * 5.0);
+        }
+        assert!(
+            session.coverage().ends_mapping(),
+            "the loose cells are done: {} frames mapped, {:?}",
+            session.frames_mapped,
+            session.coverage().shortfall()
+        );
+        let mut one_side = config.clone();
+        assert!(!session.ends_mapping(&one_side));
+        let share = session.last_patched_fraction().unwrap();
+        assert!(share > 0.3, "{share}");
+        one_side.coverage.max_patched_fraction = 1.0;
+        assert!(session.ends_mapping(&one_side), "the rule turned off");
+        for step in 13..=72 {
+            view(&mut session, f64::from(step) * 5.0);
+        }
+        assert!(session.ends_mapping(&config));
+        let share = session.last_patched_fraction().unwrap();
+        assert!(share <= 0.3, "{share}");
     }
 
     #[test]

@@ -78,6 +78,11 @@ pub struct TargetReport {
     /// part of the rock no view reached, where the closed scan is guessed.
     #[serde(default)]
     pub largest_unseen_region_cells: usize,
+    /// The share of the rock patched over unseen parts and its cut in the map's last reading
+    /// before mapping ended ([`super::mapping::MappingSession::ends_mapping`]); `None` where it
+    /// was not read (the cells never ended mapping, or the map could not be cut).
+    #[serde(default)]
+    pub map_patched_fraction: Option<f64>,
     /// Mesh size.
     pub triangles: usize,
     /// Rock height from the mesh, metres.

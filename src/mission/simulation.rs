@@ -447,7 +447,7 @@ impl<'a> Mission<'a> {
                             session.process(frame, &estimate, Some(&truth))?;
                             odometry_error = session.navigation_error_m();
                         }
-                        (session.coverage().ends_mapping(), odometry_error)
+                        (session.ends_mapping(&self.inputs.config), odometry_error)
                     }
                     None => (true, None),
                 };
