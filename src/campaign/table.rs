@@ -158,6 +158,10 @@ pub struct TargetRow {
     /// Tracked frames whose odometry the map frame's gate refused, where reported.
     #[serde(default)]
     pub map_frame_refusals: Option<u64>,
+    /// The share of the rock patched over unseen parts and its cut in the map when mapping
+    /// ended, where read (`map_patched_fraction`).
+    #[serde(default)]
+    pub map_patched_fraction: Option<f64>,
     /// Collisions of the whole run.
     pub run_collisions: Option<u64>,
     /// Why it is not mapped or not analysed, from the mission.
@@ -438,6 +442,7 @@ pub fn read_run(
             ring_drift_m: f(t, "ring_drift_m"),
             reacquisitions: u(t, "reacquisitions"),
             map_frame_refusals: u(t, "map_frame_refusals"),
+            map_patched_fraction: f(t, "map_patched_fraction"),
             run_collisions: run_row.collisions,
             error: s(t, "error"),
         });
@@ -645,6 +650,13 @@ pub fn totals(runs: &[RunRow], targets: &[TargetRow]) -> Totals {
             counted
                 .iter()
                 .filter_map(|t| Some((t.map_frame_refusals? as f64, at(t)))),
+        ),
+        figure(
+            "rock patched in the map when mapping ended (fraction of its closed surface)",
+            true,
+            counted
+                .iter()
+                .filter_map(|t| Some((t.map_patched_fraction?, at(t)))),
         ),
         figure(
             "α_min interval width (°)",
