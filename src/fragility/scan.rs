@@ -1521,22 +1521,27 @@ fn welded_vertices(mesh: &TriangleMesh) -> Vec<u32> {
         .collect()
 }
 
-/// `faces` without those that make an edge shared by more than two faces (marching cubes
-/// leaves a few where thin structures touch): at such an edge the first two faces in order
-/// stay and the rest go, and holes left behind are closed like any other.
+/// `faces` without those that make an edge shared by more than two faces, or by two faces
+/// that run it the same way (marching cubes leaves a few where thin structures touch, and
+/// welding joins sheets): at such an edge the first faces in order stay and the rest go, and
+/// holes left behind are closed like any other.
+///
+/// Why the direction too: two faces running one edge the same way leave the hole's boundary
+/// with a vertex entered twice and left once, so its walk in [`fill_holes`] ends in a dead end;
+/// the fan across that open chain added a third face on an edge inside the surface, and the
+/// closed rock was refused as non-manifold (library-a seed 64's double rock, session 49's
+/// campaign).
 fn manifold_faces(faces: &[[u32; 3]]) -> Vec<[u32; 3]> {
-    let mut uses: HashMap<(u32, u32), u8> = HashMap::new();
+    let mut runs: std::collections::HashSet<(u32, u32)> = std::collections::HashSet::new();
     faces
         .iter()
         .filter(|f| {
-            let edges =
-                [(f[0], f[1]), (f[1], f[2]), (f[2], f[0])].map(|(a, b)| (a.min(b), a.max(b)));
-            if edges.iter().any(|e| uses.get(e).is_some_and(|&n| n >= 2)) {
+            let edges = [(f[0], f[1]), (f[1], f[2]), (f[2], f[0])];
+            // An edge is taken once each way: a third face, or a second the same way, goes.
+            if edges.iter().any(|e| runs.contains(e)) {
                 return false;
             }
-            for e in edges {
-                *uses.entry(e).or_default() += 1;
-            }
+            runs.extend(edges);
             true
         })
         .copied()
@@ -2477,6 +2482,10 @@ mod tests {
             manifold_faces(&faces),
             vec![[0, 1, 2], [1, 0, 3], [2, 1, 5]]
         );
+        // A second face running 0→1 the same way as the first is dropped too: kept, it leaves
+        // the hole's boundary entering vertex 1 twice, a walk that cannot close.
+        let faces = [[0, 1, 2], [0, 1, 3], [1, 0, 4]];
+        assert_eq!(manifold_faces(&faces), vec![[0, 1, 2], [1, 0, 4]]);
     }
 
     /// A 2 m square of flat 5 cm cells around the origin, each cell at `1 + height_of(i, j)`.
