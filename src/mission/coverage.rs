@@ -72,16 +72,25 @@ pub struct CoverageConfig {
     /// Once the cells would end mapping, it still flies on along its rings while the rock in
     /// the map so far, cut off above its support and closed, is patched over more than this
     /// fraction of its surface ([`crate::fragility::scan::patched_fraction`]); it ends when
-    /// the share falls to this or the rings are flown. Default 0.3; 1 turns it off.
+    /// the share falls to this or the rings are flown. Default 1: off (the share is still read
+    /// once, when the cells end mapping, into `mission.json`'s `map_patched_fraction`).
     ///
-    /// Why: the cells stand on the rock's bounding cylinder, and a cell seen at 75° says
-    /// nothing of the rock's face behind it. On the double rock (default seeds 66–67,
-    /// library-a seed 65) mapping ended 230° round the base ring with the upper rock's face
-    /// under its lean never in view, and the scan analysis refused 41–59% of the closed rock
-    /// patched (`scan.max_filled_fraction` 0.4). Over the ten-seed campaign's mapped targets
-    /// (sessions 47–50), patched shares up to 0.30 read within 1.8° but one, and 0.31–0.47
-    /// read +2.2°, +2.4°, +4.1° and −2.8° off where analysed. 0.3 leaves the analysis a margin
-    /// below its 0.4 for the mesh BA and re-fusion redraw.
+    /// Why it exists: the cells stand on the rock's bounding cylinder, and a cell seen at 75°
+    /// says nothing of the rock's face behind it. In the ten-seed campaign (sessions 47–50)
+    /// 11 of 15 refusals were closed rocks patched over more than 40%
+    /// (`scan.max_filled_fraction`), their flights ended 225–274° round the base ring; among
+    /// the analysed targets, patched shares up to 0.30 read within 1.8° but one, and 0.31–0.47
+    /// read +2.2°, +2.4°, +4.1° and −2.8° off.
+    ///
+    /// Why it is off: at 0.3, over 22 runs flown paired with it off (three worlds × seeds
+    /// 60–64, default seeds 65–69, library-a seeds 65–66; session 51's campaign document),
+    /// 65 of 78 targets read within 2° either way and 2 over +3° either way, the truth fell
+    /// inside on 68 of 72 against 69, and the median width went 4.50° → 4.63°. A refusal of
+    /// library-b's E34 turned into +0.1° and default seed 60's double rock went from +3.9° to
+    /// +2.0°; but flown on, library-a seed 61's slab on edge was cut at the terrain under its
+    /// pedestal (+42°, outside its interval), library-a seed 66's stone E22 was refused for its
+    /// base, and E34's longer flight drifted to F@2cm 0.65. Flying on changes the rest of the
+    /// flight as much as the rock it was for.
     pub max_patched_fraction: f64,
     /// How many mapped frames apart the map's patched share is read once the cells would end
     /// mapping (meshing and closing the map takes a fraction of a second). Default 10.
@@ -99,7 +108,7 @@ impl Default for CoverageConfig {
             max_depth_m: 6.0,
             min_sweep_deg: 0.0,
             max_unseen_region_cells: 4,
-            max_patched_fraction: 0.3,
+            max_patched_fraction: 1.0,
             patched_check_every_frames: 10,
         }
     }

@@ -484,16 +484,13 @@ impl MappingSession {
     /// ([`CylinderCoverage::ends_mapping`]) and the rock in the map so far is patched over no
     /// more than `coverage.max_patched_fraction` of its closed surface. The share is read
     /// (the tracking volume meshed, cut and closed) at most every
-    /// `coverage.patched_check_every_frames` mapped frames, and only once the cells are done.
-    /// A map that cannot be cut yet (no neck, nothing above it) does not hold the flight: the
-    /// analysis will say why.
+    /// `coverage.patched_check_every_frames` mapped frames, and only once the cells are done;
+    /// with the rule off (1) it is read once, for the report. A map that cannot be cut yet (no
+    /// neck, nothing above it) does not hold the flight: the analysis will say why.
     pub fn ends_mapping(&mut self, config: &MissionConfig) -> bool {
         let coverage = &config.coverage;
         if !self.coverage.ends_mapping() {
             return false;
-        }
-        if coverage.max_patched_fraction >= 1.0 {
-            return true;
         }
         let due = self.patched_check.is_none_or(|(at, _)| {
             self.frames_mapped >= at + coverage.patched_check_every_frames.max(1)
@@ -515,9 +512,11 @@ impl MappingSession {
             );
             self.patched_check = Some((self.frames_mapped, share));
         }
-        self.patched_check
-            .and_then(|(_, share)| share)
-            .is_none_or(|share| share <= coverage.max_patched_fraction)
+        coverage.max_patched_fraction >= 1.0
+            || self
+                .patched_check
+                .and_then(|(_, share)| share)
+                .is_none_or(|share| share <= coverage.max_patched_fraction)
     }
 
     /// The rock's patched share at the last reading by [`Self::ends_mapping`] (`None` before
@@ -1235,6 +1234,7 @@ mod tests {
         config.coverage.max_unseen_region_cells = 0;
         config.coverage.top_cells = 0;
         config.coverage.patched_check_every_frames = 1;
+        config.coverage.max_patched_fraction = 0.3;
         let camera = PinholeCamera::from_hfov(160, 120, 87.0).unwrap();
         let cylinder = rock_cylinder(&world, rock, &Vector3::zeros(), &config.cylinder).unwrap();
         let mut session = MappingSession::new(1, &cylinder, &camera, &config).unwrap();
