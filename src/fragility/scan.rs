@@ -26,7 +26,7 @@
 //! [`analyze_scan`] runs all this and the analysis with the contact polygon
 //! ([`super::ContactSpec::Polygon`]).
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 
 use nalgebra::{Point2, Point3};
 use scarp_slam::TriangleMesh;
@@ -1532,7 +1532,7 @@ fn welded_vertices(mesh: &TriangleMesh) -> Vec<u32> {
 /// closed rock was refused as non-manifold (library-a seed 64's double rock, session 49's
 /// campaign).
 fn manifold_faces(faces: &[[u32; 3]]) -> Vec<[u32; 3]> {
-    let mut runs: std::collections::HashSet<(u32, u32)> = std::collections::HashSet::new();
+    let mut runs: HashSet<(u32, u32)> = HashSet::new();
     faces
         .iter()
         .filter(|f| {
@@ -2409,8 +2409,8 @@ mod tests {
     }
 
     /// The share a mapping flight reads is the one the analysis refuses on: the same cut and
-    /// the same patches. A rock seen all round is patched only at its cut; with its upper
-    /// half's east side never seen, over a third of it is patched.
+    /// the same patches. A rock seen all round is patched only at its cut; with its east side
+    /// above the neck never seen, about a third of it is patched.
     #[test]
     fn the_patched_share_is_what_closing_measures() {
         let config = ScanConfig::default();

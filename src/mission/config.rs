@@ -357,6 +357,16 @@ pub struct MappingConfig {
 }
 
 impl MappingConfig {
+    /// How a target's map is meshed: the refinement's meshing with small components dropped
+    /// ([`Self::min_component_triangles`]). The tracking volume's mesh read in flight and the
+    /// refined map's mesh are cut alike.
+    pub fn meshing(&self) -> scarp_slam::meshing::MeshingConfig {
+        scarp_slam::meshing::MeshingConfig {
+            min_component_triangles: self.min_component_triangles,
+            ..self.refine.meshing
+        }
+    }
+
     /// The tracker's gate against the state estimate (`None` when `estimate_gate_sigmas` is
     /// 0), scaled to `estimator`'s attitude walk.
     pub fn estimate_rotation_gate(

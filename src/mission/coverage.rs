@@ -93,7 +93,7 @@ pub struct CoverageConfig {
     /// flight as much as the rock it was for.
     pub max_patched_fraction: f64,
     /// How many mapped frames apart the map's patched share is read once the cells would end
-    /// mapping (meshing and closing the map takes a fraction of a second). Default 10.
+    /// mapping (each reading meshes, cuts and closes the whole map). Default 10.
     pub patched_check_every_frames: usize,
 }
 

@@ -22,7 +22,7 @@ use scarp_slam::mapping::{
     BetweenFrame, KeyframeSet, ModelTracker, ModelTrackingConfig, RefineConfig, TrackedFrame,
     refine_keyframes,
 };
-use scarp_slam::meshing::{MeshingConfig, extract_mesh};
+use scarp_slam::meshing::extract_mesh;
 use scarp_slam::tsdf::Roi;
 use scarp_slam::tsdf::TsdfConfig;
 use scarp_slam::{PinholeCamera, PointCloud, RgbdFrame, TriangleMesh};
@@ -496,13 +496,7 @@ impl MappingSession {
             self.frames_mapped >= at + coverage.patched_check_every_frames.max(1)
         });
         if due {
-            let mesh = extract_mesh(
-                self.tracker.volume(),
-                &MeshingConfig {
-                    min_component_triangles: config.mapping.min_component_triangles,
-                    ..config.mapping.refine.meshing
-                },
-            );
+            let mesh = extract_mesh(self.tracker.volume(), &config.mapping.meshing());
             let share = patched_fraction(&mesh, &config.fragility.scan).ok();
             tracing::debug!(
                 "target {}: {} frames mapped, the map's rock patched over {}",
@@ -818,10 +812,7 @@ pub fn finish_target(
     let odometry_poses = &keyframes.world_from_camera_odometry;
     let refine = RefineConfig {
         tsdf: session.tracker.volume().config().clone(),
-        meshing: MeshingConfig {
-            min_component_triangles: config.mapping.min_component_triangles,
-            ..config.mapping.refine.meshing
-        },
+        meshing: config.mapping.meshing(),
         mesh_before: false,
         ..config.mapping.refine.clone()
     };
@@ -1222,13 +1213,8 @@ mod tests {
     /// ring has gone round.
     #[test]
     fn mapping_flies_on_while_the_rock_in_the_map_is_mostly_unseen() {
-        use scarp_datasets::world::RockRole;
         let world = World::builtin_default().unwrap();
-        let rock = world
-            .rocks
-            .iter()
-            .find(|r| r.role == RockRole::Target)
-            .unwrap();
+        let rock = world.targets().next().unwrap();
         let mut config = MissionConfig::default();
         config.coverage.threshold = 0.05;
         config.coverage.max_unseen_region_cells = 0;
