@@ -161,6 +161,15 @@ fn fragility_config(path: Option<String>) -> Result<FragilityConfig> {
     })
 }
 
+/// `config` with the world's up (+z): the truth is analysed in the world frame whatever up the
+/// scan's analysis takes.
+fn world_up_config(config: &FragilityConfig) -> FragilityConfig {
+    FragilityConfig {
+        up: [0.0, 0.0, 1.0],
+        ..config.clone()
+    }
+}
+
 /// `--mesh MESH WORLD ROCK_ID LABEL [FRAGILITY_TOML]`: one scan (world frame, z up, such as
 /// `scarp map --poses groundtruth` writes) against rock `ROCK_ID` of `WORLD`; prints its
 /// readings, or `REFUSED label truth reason`.
@@ -174,7 +183,11 @@ fn single_mesh(args: &[String]) -> Result<()> {
         .rock(rock_id.parse()?)
         .context("no such rock in the world")?;
     let pedestal = rock.pedestal.as_ref().context("the rock has no pedestal")?;
-    let truth = analyze(&rock.mesh, ContactSpec::Pedestal(pedestal), &config)?;
+    let truth = analyze(
+        &rock.mesh,
+        ContactSpec::Pedestal(pedestal),
+        &world_up_config(&config),
+    )?;
     let mesh = read_mesh(mesh)?;
     match analyze_scan(&mesh, &config) {
         Ok((closed, a)) => {
@@ -232,7 +245,11 @@ fn main() -> Result<()> {
             let Some(pedestal) = &rock.pedestal else {
                 continue;
             };
-            let truth = analyze(&rock.mesh, ContactSpec::Pedestal(pedestal), &config)?;
+            let truth = analyze(
+                &rock.mesh,
+                ContactSpec::Pedestal(pedestal),
+                &world_up_config(&config),
+            )?;
             let label = format!(
                 "{} {} {} {}",
                 run.parent().unwrap().file_name().unwrap().to_string_lossy(),
@@ -325,11 +342,16 @@ fn print_row(label: &str, truth: &FragilityReport, a_map: f64, scan: &FragilityR
 /// height's error against the truth's `truth_z`, and the support's measured roughness
 /// ([`scarp::fragility::scan::SupportPlane::roughness_m`]; `nan` without a plane).
 fn print_plane(label: &str, closed: &ClosedScan, truth_z: f64) {
+    // The contact's height at the rock's axis, in the scan's frame (the closed scan's is its
+    // support's, levelled).
+    let axis = closed.profile.axis_xy;
+    let contact =
+        closed.support_from_scan.inverse() * Point3::new(axis.x, axis.y, closed.contact_height_m());
     println!(
         "PLANE {} {} {:+.1} {:.1}",
         label.replace(' ', "_"),
         closed.support_plane.is_some(),
-        (closed.contact_height_m() - truth_z) * 1e3,
+        (contact.z - truth_z) * 1e3,
         closed
             .support_plane
             .map_or(f64::NAN, |p| p.roughness_m * 1e3)

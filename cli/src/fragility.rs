@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, bail};
 use scarp_slam::TriangleMesh;
 
-use scarp::fragility::scan::{analyze_closed_scan, close_scan};
+use scarp::fragility::scan::{ClosedScan, analyze_closed_scan, close_scan};
 use scarp::fragility::{
     ContactSpec, FragilityConfig, FragilityReport, analyze_detailed, figure::write_figure,
 };
@@ -186,6 +186,7 @@ pub fn run(args: FragilityArgs) -> anyhow::Result<()> {
             support_plane_m = closed.support_plane.map(|p| p.height_m),
             support_roughness_m = closed.support_plane.map(|p| p.roughness_m),
             partial_support_m = closed.partial_support.map(|p| p.height_m),
+            support_tilt_deg = closed.support_plane.map(|p| p.tilt_deg()),
             loops = closed.filled_patches.len(),
             "scan cut above its support and closed"
         );
@@ -193,7 +194,9 @@ pub fn run(args: FragilityArgs) -> anyhow::Result<()> {
     } else {
         None
     };
-    let rock = closed_scan.as_ref().map_or(&mesh, |closed| &closed.mesh);
+    // A given pedestal or contact height is in the scan's frame, as the closed rock must be.
+    let closed_rock = closed_scan.as_ref().map(ClosedScan::mesh_in_scan_frame);
+    let rock = closed_rock.as_ref().unwrap_or(&mesh);
     let pedestal = args.pedestal.as_deref().map(read_mesh).transpose()?;
     tracing::info!(mesh = %args.mesh.display(), faces = rock.faces.len(), "fragility analysis");
     // A scan without a given contact gets the extrapolated contact and its interval.

@@ -353,6 +353,11 @@ pub struct FragilityReport {
     pub uncertainty: UncertaintyReport,
     /// Up direction used, unit vector, input frame.
     pub up: [f64; 3],
+    /// The tilt of the support plane the contact was read in from the plane normal to `up`,
+    /// degrees: a scan's support as fitted ([`scan::close_scan`]), 0 where the contact was read
+    /// normal to up (every other analysis, and a scan whose support was not levelled).
+    #[serde(default)]
+    pub support_tilt_deg: f64,
     /// Repairs made to the rock mesh.
     pub repairs: MeshRepairs,
 }
@@ -430,6 +435,24 @@ pub struct FragilityAnalysis {
 }
 
 impl FragilityAnalysis {
+    /// Moves the analysis to another input frame, `new_from_old` (a rotation about the origin):
+    /// the report's positions, inertia and up, and what [`Self::closed_rock`] and
+    /// [`Self::alpha_min_on_contact`] take and give. Heights, azimuths and angles are the
+    /// levelled frame's and do not change.
+    pub(crate) fn rotate_input_frame(&mut self, new_from_old: &Rotation3<f64>) {
+        self.input_from_levelled = new_from_old * self.input_from_levelled;
+        let r = &mut self.report;
+        let rotate = |p: [f64; 3]| -> [f64; 3] { (new_from_old * Vector3::from(p)).into() };
+        r.center_of_mass = rotate(r.center_of_mass);
+        r.up = rotate(r.up);
+        for p in &mut r.contact_polygon {
+            *p = rotate(*p);
+        }
+        let inertia = Matrix3::from(r.inertia_kg_m2);
+        r.inertia_kg_m2 =
+            (new_from_old.matrix() * inertia * new_from_old.matrix().transpose()).into();
+    }
+
     /// The closed rock above the contact (section triangulated), in the input frame, metres.
     pub fn closed_rock(&self) -> TriangleMesh {
         self.rock.to_mesh(&self.input_from_levelled)
@@ -801,6 +824,7 @@ pub fn analyze_detailed(
         },
         uncertainty,
         up: Vector3::from(config.up).normalize().into(),
+        support_tilt_deg: 0.0,
         repairs,
     };
     let support_solid = match pedestal {

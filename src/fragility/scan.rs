@@ -28,7 +28,9 @@
 
 use std::collections::{HashMap, HashSet};
 
-use nalgebra::{Point2, Point3};
+use nalgebra::{
+    Isometry3, Matrix2, Point2, Point3, Rotation3, Translation3, UnitQuaternion, Vector2, Vector3,
+};
 use scarp_slam::TriangleMesh;
 use scarp_slam::geometry::{convex_hull_2d, polygon_centroid, polygon_signed_area};
 use serde::{Deserialize, Serialize};
@@ -398,6 +400,12 @@ pub struct ClosedScan {
     pub scanned_area_m2: f64,
     /// Area added to close it (the cut and every unseen hole), m².
     pub filled_area_m2: f64,
+    /// The frame every position of this closed scan is in: the support frame, the input scan
+    /// rotated about its origin by this, so that the support's fitted plane is level
+    /// ([`SupportPlane::slope`]); the identity where the support was level within
+    /// [`MIN_LEVELLED_TILT_DEG`], tilted beyond [`MAX_LEVELLED_TILT_DEG`] or not found.
+    /// [`analyze_closed_scan`] reports in the input scan's frame.
+    pub support_from_scan: Rotation3<f64>,
 }
 
 /// A patch [`close_scan`] laid over a boundary loop of the scan: a fan of triangles around the
@@ -411,7 +419,7 @@ pub struct FilledPatch {
     /// Sum of the fan's triangle areas times their normals, m², along the closed rock's face
     /// orientation (outward on an outward-wound scan): its direction is the patch's mean
     /// normal, its length at most [`FilledPatch::area_m2`].
-    pub area_vector_m2: nalgebra::Vector3<f64>,
+    pub area_vector_m2: Vector3<f64>,
     /// Height of the loop's highest vertex, metres: a loop that stays within a few
     /// centimetres of the cut closes the rock's base, not a hole.
     pub boundary_top_m: f64,
@@ -504,6 +512,13 @@ pub struct SupportPlane {
     /// [`SupportPlane::height_m`] and `support_radius_m` of the rock's axis. A rough or sloping
     /// support, or a blurred scan of it, leaves the rock's resting height less sure.
     pub roughness_m: f64,
+    /// The support's slope (∂z/∂x, ∂z/∂y) in the scan's frame: the plane fitted by area-weighted
+    /// least squares to the same faces, refitted to those within
+    /// [`SUPPORT_SLOPE_REFIT_BAND_M`] of the first fit. Zero where those faces do not spread
+    /// over [`SUPPORT_SLOPE_MIN_SPREAD_M`] both ways (a slope there would be a guess). A map
+    /// frame tilted by its state estimate's attitude error tilts a level support by as much:
+    /// [`close_scan`] reads the contact in the support's own plane.
+    pub slope: [f64; 2],
 }
 
 /// Upward faces within this of the support plane's height, metres, measure its roughness: wide
@@ -511,11 +526,31 @@ pub struct SupportPlane {
 /// and the rock's own faces out.
 pub const SUPPORT_ROUGHNESS_BAND_M: f64 = 0.03;
 
+/// Upward faces within this of the support's first fitted plane, metres, refit its slope: the
+/// first fit's band ([`SUPPORT_ROUGHNESS_BAND_M`]) may hold the ground or the rock's lowest
+/// faces on one side, which tilt it.
+pub const SUPPORT_SLOPE_REFIT_BAND_M: f64 = 0.012;
+
+/// The support faces' least spread (the standard deviation of their positions along the
+/// narrower horizontal axis, metres) for a slope to be fitted: a slope read over a few
+/// centimetres of pedestal top is noise.
+pub const SUPPORT_SLOPE_MIN_SPREAD_M: f64 = 0.05;
+
 impl SupportPlane {
     /// 1σ of the contact's height on this support, metres: its roughness and the mesh's own
     /// error `mesh_sigma_m` in quadrature.
     pub fn height_sigma_m(&self, mesh_sigma_m: f64) -> f64 {
         self.roughness_m.hypot(mesh_sigma_m)
+    }
+
+    /// The support's upward unit normal in the scan's frame (+z for a level support).
+    pub fn normal(&self) -> Vector3<f64> {
+        Vector3::new(-self.slope[0], -self.slope[1], 1.0).normalize()
+    }
+
+    /// The support's tilt from the scan's +z, degrees.
+    pub fn tilt_deg(&self) -> f64 {
+        self.normal().z.clamp(-1.0, 1.0).acos().to_degrees()
     }
 }
 
@@ -546,14 +581,27 @@ fn support_top(
     }
 }
 
-/// `(height, area, sector)` of each upward-facing face of `mesh` within the support search's
-/// band about `neck_z` and `support_radius_m` of `axis_xy` (metres, m², of [`SECTORS`]).
+/// An upward-facing face of a scan near its support.
+#[derive(Debug, Clone, Copy)]
+struct UpwardFace {
+    /// Its centre's height, metres along z.
+    z: f64,
+    /// Its area, m².
+    area_m2: f64,
+    /// Its azimuth sector (of [`SECTORS`]) around the rock's axis.
+    sector: usize,
+    /// Its centre's horizontal position, metres.
+    xy: Point2<f64>,
+}
+
+/// Each upward-facing face of `mesh` within the support search's band about `neck_z` and
+/// `support_radius_m` of `axis_xy`.
 fn upward_faces_near_neck(
     mesh: &TriangleMesh,
     axis_xy: &Point2<f64>,
     neck_z: f64,
     config: &ScanConfig,
-) -> Vec<(f64, f64, usize)> {
+) -> Vec<UpwardFace> {
     mesh.faces
         .iter()
         .filter_map(|f| {
@@ -567,7 +615,12 @@ fn upward_faces_near_neck(
                 && centre.z <= neck_z + config.support_search_above_m + SUPPORT_ROUGHNESS_BAND_M
                 && centre.z >= neck_z - config.support_search_below_m - SUPPORT_ROUGHNESS_BAND_M
                 && (xy - axis_xy).norm() <= config.support_radius_m)
-                .then(|| (centre.z, 0.5 * area2, sector_of(&xy, axis_xy, SECTORS)))
+                .then(|| UpwardFace {
+                    z: centre.z,
+                    area_m2: 0.5 * area2,
+                    sector: sector_of(&xy, axis_xy, SECTORS),
+                    xy,
+                })
         })
         .collect()
 }
@@ -580,7 +633,7 @@ fn upward_faces_near_neck(
 /// [`SUPPORT_ROUGHNESS_BAND_M`]. `None` when no level qualifies (the support is not seen around
 /// that much of the turn).
 fn support_level(
-    faces: &[(f64, f64, usize)],
+    faces: &[UpwardFace],
     neck_z: f64,
     config: &ScanConfig,
     min_sectors: usize,
@@ -594,8 +647,8 @@ fn support_level(
             - i as f64 * SUPPORT_SEARCH_STEP_M;
         let at_level = faces
             .iter()
-            .filter(|(fz, _, _)| (fz - z).abs() <= 0.5 * SUPPORT_BIN_M)
-            .map(|&(_, _, sector)| sector);
+            .filter(|f| (f.z - z).abs() <= 0.5 * SUPPORT_BIN_M)
+            .map(|f| f.sector);
         (sectors_filled(at_level) >= min_sectors).then_some(z)
     })?;
     // Area-weighted (Σ a, Σ a·dz, Σ a·dz²) of the faces within `band` of `z`, dz = height − z:
@@ -603,9 +656,10 @@ fn support_level(
     let moments = |z: f64, band: f64| {
         faces
             .iter()
-            .filter(|(fz, _, _)| (fz - z).abs() <= band)
-            .fold((0.0, 0.0, 0.0), |(w, s, s2), &(fz, a, _)| {
-                (w + a, s + a * (fz - z), s2 + a * (fz - z) * (fz - z))
+            .filter(|f| (f.z - z).abs() <= band)
+            .fold((0.0, 0.0, 0.0), |(w, s, s2), f| {
+                let dz = f.z - z;
+                (w + f.area_m2, s + f.area_m2 * dz, s2 + f.area_m2 * dz * dz)
             })
     };
     let (area, offset, _) = moments(level, SUPPORT_BIN_M);
@@ -618,7 +672,49 @@ fn support_level(
     Some(SupportPlane {
         height_m,
         roughness_m: (s2 / w - mean * mean).max(0.0).sqrt(),
+        slope: support_slope(faces, height_m).into(),
     })
+}
+
+/// The slope (∂z/∂x, ∂z/∂y) of the plane fitted by area-weighted least squares to `faces`
+/// within [`SUPPORT_ROUGHNESS_BAND_M`] of the level `height_m`, then refitted to those within
+/// [`SUPPORT_SLOPE_REFIT_BAND_M`] of that plane; zero where the faces fitted do not spread
+/// [`SUPPORT_SLOPE_MIN_SPREAD_M`] both ways.
+fn support_slope(faces: &[UpwardFace], height_m: f64) -> Vector2<f64> {
+    // The plane z = z0 + slope · (xy − c0); first the level at `height_m`.
+    let (mut c0, mut z0, mut slope) = (Point2::origin(), height_m, Vector2::zeros());
+    for band in [SUPPORT_ROUGHNESS_BAND_M, SUPPORT_SLOPE_REFIT_BAND_M] {
+        let fitted: Vec<&UpwardFace> = faces
+            .iter()
+            .filter(|f| (f.z - z0 - slope.dot(&(f.xy - c0))).abs() <= band)
+            .collect();
+        let area: f64 = fitted.iter().map(|f| f.area_m2).sum();
+        if area <= 0.0 {
+            return Vector2::zeros();
+        }
+        let centre = fitted
+            .iter()
+            .fold(Vector2::zeros(), |c, f| c + f.area_m2 * f.xy.coords)
+            / area;
+        let mean_z = fitted.iter().map(|f| f.area_m2 * f.z).sum::<f64>() / area;
+        // Area-weighted covariances of the positions, and of the positions with the heights.
+        let (mut sxx, mut sxz) = (Matrix2::zeros(), Vector2::zeros());
+        for f in &fitted {
+            let d = f.xy.coords - centre;
+            sxx += f.area_m2 * d * d.transpose();
+            sxz += f.area_m2 * d * (f.z - mean_z);
+        }
+        sxx /= area;
+        sxz /= area;
+        if sxx.symmetric_eigenvalues().min() < SUPPORT_SLOPE_MIN_SPREAD_M.powi(2) {
+            return Vector2::zeros();
+        }
+        let Some(inverse) = sxx.try_inverse() else {
+            return Vector2::zeros();
+        };
+        (c0, z0, slope) = (Point2::from(centre), mean_z, inverse * sxz);
+    }
+    slope
 }
 
 /// The edge of the support's top seen around a rock: per azimuth sector around the basal
@@ -738,7 +834,7 @@ impl SupportOutline {
             .filled_radii(gaps)
             .into_iter()
             .zip(&self.azimuth_rad)
-            .map(|(r, a)| self.axis_xy + r * nalgebra::Vector2::new(a.cos(), a.sin()))
+            .map(|(r, a)| self.axis_xy + r * Vector2::new(a.cos(), a.sin()))
             .collect();
         let hull = convex_hull_2d(&points);
         (hull.len() >= 3 && polygon_signed_area(&hull) > 0.0).then_some(hull)
@@ -1140,7 +1236,7 @@ impl BasalProfile {
             // sector's middle moves the far end of an elongated base sideways by up to 9% of
             // its radius (5 cm on a slab standing on edge, 0.6 m long, whose α_min is across
             // its 0.22 m thickness).
-            contact.push(self.axis_xy + r0 * nalgebra::Vector2::new(azimuth.cos(), azimuth.sin()));
+            contact.push(self.axis_xy + r0 * Vector2::new(azimuth.cos(), azimuth.sin()));
         }
         let hull = convex_hull_2d(&contact);
         if hull.len() < 3 || polygon_signed_area(&hull).abs() <= 0.0 {
@@ -1175,7 +1271,7 @@ impl BasalProfile {
                 ),
                 |(r, a)| (*r, *a),
             );
-        self.axis_xy + radius_m * nalgebra::Vector2::new(azimuth.cos(), azimuth.sin())
+        self.axis_xy + radius_m * Vector2::new(azimuth.cos(), azimuth.sin())
     }
 }
 
@@ -1649,7 +1745,7 @@ fn fan(mesh: &mut TriangleMesh, chain: &[u32]) -> Option<FilledPatch> {
     let c = mesh.positions.len() as u32;
     mesh.positions.push(centroid);
     if !mesh.normals.is_empty() {
-        mesh.normals.push(nalgebra::Vector3::zeros());
+        mesh.normals.push(Vector3::zeros());
     }
     if !mesh.colors.is_empty() {
         mesh.colors.push([128; 3]);
@@ -1657,10 +1753,10 @@ fn fan(mesh: &mut TriangleMesh, chain: &[u32]) -> Option<FilledPatch> {
     let mut patch = FilledPatch {
         area_m2: 0.0,
         centroid: Point3::origin(),
-        area_vector_m2: nalgebra::Vector3::zeros(),
+        area_vector_m2: Vector3::zeros(),
         boundary_top_m: f64::NEG_INFINITY,
     };
-    let mut moment = nalgebra::Vector3::zeros();
+    let mut moment = Vector3::zeros();
     for k in 0..chain.len() {
         let face = [chain[k], chain[(k + 1) % chain.len()], c];
         let [a, b, o] = face.map(|v| mesh.positions[v as usize].cast::<f64>());
@@ -1822,15 +1918,77 @@ pub fn scan_centroid(
         .map_err(|e| FragilityError::Degenerate(format!("the closed scan: {e}")))
 }
 
+/// A support tilted less than this from the scan's +z, degrees, is read as it stands. Fitted
+/// on maps fused with true poses, whose supports are level, the tilt reads 0.08–0.14°: the
+/// fit's own error. Levelled by that much, a flat-based block, whose contact turns on the
+/// millimetres between its base and the slabs it is read in, moved by up to 5.5° (seeds 1–4 of
+/// `fresh_shapes.py`: 3 fewer within 2°); the map frames of the three worlds' campaigns were
+/// tilted 0.33° (median) to 0.9°.
+pub const MIN_LEVELLED_TILT_DEG: f64 = 0.2;
+
+/// A support fitted as tilted more than this, degrees, is not levelled: the map's frame is
+/// levelled by its state estimate to within a degree or two, and a support found as a level
+/// (in bins of a centimetre over up to a metre) cannot slope much more, so such a fit is the
+/// ground or the rock mixed into it.
+pub const MAX_LEVELLED_TILT_DEG: f64 = 3.0;
+
 /// Separates the rock from its pedestal and the ground just above the support plane (or at the
 /// neck when no plane is seen all round), extrapolates its contact polygon from the basal
 /// profile and closes it. The scan is z-up, world frame, metres.
+///
+/// The contact is read in the support's own plane: where the support plane is found tilted
+/// from the scan's z by [`MIN_LEVELLED_TILT_DEG`] to [`MAX_LEVELLED_TILT_DEG`], the scan is
+/// rotated so that it is level and closed again, and the closed scan is in that frame
+/// ([`ClosedScan::support_from_scan`]). A map's frame tilts with its state estimate's attitude
+/// error (a few tenths of a degree over a mapping flight); read against horizontal slabs, a
+/// support tilted by that cuts a long, thin base higher at one end than at the other: library-a's
+/// slab on edge, mapped with its frame tilted 0.74°, read α_min 2.48° high, and 1.41° high
+/// once read in its support's plane (0.70° with gravity known too). Gravity stays the scan's z
+/// ([`analyze_closed_scan`]): a real support need not be level. Where the levelled scan cannot
+/// be closed, the scan is closed as it stands.
 ///
 /// # Errors
 /// [`FragilityError::EmptyMesh`] for an empty scan or nothing above the cut;
 /// [`FragilityError::Degenerate`] when no neck is found or the basal profile is too sparse for
 /// a contact polygon.
 pub fn close_scan(mesh: &TriangleMesh, config: &ScanConfig) -> Result<ClosedScan, FragilityError> {
+    let closed = close_scan_as_it_stands(mesh, config)?;
+    let Some(support_from_scan) = closed.support_plane.as_ref().and_then(levelling) else {
+        return Ok(closed);
+    };
+    let mut levelled = mesh.clone();
+    levelled.transform(&Isometry3::from_parts(
+        Translation3::identity(),
+        UnitQuaternion::from_rotation_matrix(&support_from_scan),
+    ));
+    match close_scan_as_it_stands(&levelled, config) {
+        Ok(levelled) => Ok(ClosedScan {
+            support_from_scan,
+            ..levelled
+        }),
+        Err(e) => {
+            tracing::debug!(
+                "the scan levelled on its support does not close ({e}): closed as it stands"
+            );
+            Ok(closed)
+        }
+    }
+}
+
+/// The rotation that levels `support` ([`close_scan`]), when its tilt is one to level.
+fn levelling(support: &SupportPlane) -> Option<Rotation3<f64>> {
+    let tilt_deg = support.tilt_deg();
+    (MIN_LEVELLED_TILT_DEG..=MAX_LEVELLED_TILT_DEG)
+        .contains(&tilt_deg)
+        .then(|| Rotation3::rotation_between(&support.normal(), &Vector3::z()))
+        .flatten()
+}
+
+/// [`close_scan`] in the scan's own frame, z up.
+fn close_scan_as_it_stands(
+    mesh: &TriangleMesh,
+    config: &ScanConfig,
+) -> Result<ClosedScan, FragilityError> {
     let CutRock {
         mut rock,
         neck_z,
@@ -1901,6 +2059,7 @@ pub fn close_scan(mesh: &TriangleMesh, config: &ScanConfig) -> Result<ClosedScan
         neck_height_m: neck_z,
         scanned_area_m2,
         filled_area_m2,
+        support_from_scan: Rotation3::identity(),
     })
 }
 
@@ -1909,6 +2068,16 @@ pub fn close_scan(mesh: &TriangleMesh, config: &ScanConfig) -> Result<ClosedScan
 const CUT_LOOP_BAND_M: f64 = 0.03;
 
 impl ClosedScan {
+    /// The closed rock ([`ClosedScan::mesh`]) in the input scan's frame, metres.
+    pub fn mesh_in_scan_frame(&self) -> TriangleMesh {
+        let mut mesh = self.mesh.clone();
+        mesh.transform(&Isometry3::from_parts(
+            Translation3::identity(),
+            UnitQuaternion::from_rotation_matrix(&self.support_from_scan.inverse()),
+        ));
+        mesh
+    }
+
     /// The patches over parts of the rock no camera saw: every filled loop but the cut's.
     pub fn unseen_patches(&self) -> impl Iterator<Item = &FilledPatch> {
         self.filled_patches
@@ -2096,8 +2265,9 @@ impl ClosedScan {
 }
 
 /// The fragility of a scanned rock: [`close_scan`], then [`analyze_closed_scan`]. The returned
-/// scan's `contact_polygon` is the contact the analysis used (the median reading). `config.up`
-/// should be +z, the scan's up.
+/// scan's `contact_polygon` is the contact the analysis used (the median reading), in the
+/// closed scan's frame ([`ClosedScan::support_from_scan`]); the analysis is in the scan's.
+/// `config.up` should be +z, the scan's up.
 ///
 /// # Errors
 /// Those of [`close_scan`] and [`analyze_closed_scan`].
@@ -2107,9 +2277,12 @@ pub fn analyze_scan(
 ) -> Result<(ClosedScan, FragilityAnalysis), FragilityError> {
     let mut closed = close_scan(mesh, &config.scan)?;
     let analysis = analyze_closed_scan(&closed, config)?;
-    closed
+    closed.contact_polygon = analysis
+        .report
         .contact_polygon
-        .clone_from(&analysis.report.contact_polygon);
+        .iter()
+        .map(|p| (closed.support_from_scan * Vector3::from(*p)).into())
+        .collect();
     Ok((closed, analysis))
 }
 
@@ -2142,11 +2315,33 @@ pub fn analyze_scan(
 /// Independent errors add in quadrature; taking the envelope of every reading stacks their
 /// extremes: on 94 scans its median width was 6.9° (truth inside 97%), against 4.1° (95%).
 ///
+/// The contact is read in the closed scan's frame (its support levelled,
+/// [`ClosedScan::support_from_scan`]) and α against `config.up` in the scan's frame: gravity
+/// is the map's, not the support's, which need not be level. The report is in the scan's frame,
+/// with the support's tilt in `support_tilt_deg`.
+///
 /// # Errors
 /// Those of [`analyze_detailed`]; a centre of mass outside the extrapolated contact is a
 /// [`FragilityError::Degenerate`] naming the contact as hidden, and so is a scan without a
 /// support plane under [`ScanConfig::require_support_plane`].
 pub fn analyze_closed_scan(
+    closed: &ClosedScan,
+    config: &FragilityConfig,
+) -> Result<FragilityAnalysis, FragilityError> {
+    let support_from_scan = closed.support_from_scan;
+    let in_support_frame = FragilityConfig {
+        up: (support_from_scan * Vector3::from(config.up)).into(),
+        ..config.clone()
+    };
+    let mut analysis = analyze_in_support_frame(closed, &in_support_frame)?;
+    analysis.rotate_input_frame(&support_from_scan.inverse());
+    analysis.report.support_tilt_deg = support_from_scan.angle().to_degrees();
+    Ok(analysis)
+}
+
+/// [`analyze_closed_scan`] in the closed scan's frame ([`ClosedScan::support_from_scan`]), with
+/// `config.up` in that frame.
+fn analyze_in_support_frame(
     closed: &ClosedScan,
     config: &FragilityConfig,
 ) -> Result<FragilityAnalysis, FragilityError> {
@@ -2428,7 +2623,7 @@ mod tests {
         let mut hidden = open_scan();
         let positions = hidden.positions.clone();
         hidden.faces.retain(|f| {
-            let centre = f.iter().fold(nalgebra::Vector3::zeros(), |acc, &v| {
+            let centre = f.iter().fold(Vector3::zeros(), |acc, &v| {
                 acc + positions[v as usize].coords.cast::<f64>()
             }) / 3.0;
             !(centre.z > 1.1 && centre.x > 0.0)
@@ -2529,6 +2724,100 @@ mod tests {
         assert!(far.roughness_m < 1e-6, "{far:?}");
     }
 
+    /// A support sloping 1 cm in a metre eastwards is fitted as that slope (0.57°); a level one
+    /// as level; a slope read over a strip narrower than the least spread is not read at all.
+    #[test]
+    fn the_support_slope_is_fitted_to_its_top() {
+        let config = ScanConfig::default();
+        let axis = Point2::origin();
+        let sloping = support_top(&cells(|i, _| 0.0005 * f64::from(i)), &axis, 1.05, &config)
+            .0
+            .unwrap();
+        assert!((sloping.slope[0] - 0.01).abs() < 2e-4, "{sloping:?}");
+        assert!(sloping.slope[1].abs() < 2e-4, "{sloping:?}");
+        assert!((sloping.tilt_deg() - 0.573).abs() < 0.02, "{sloping:?}");
+        let level = support_top(&cells(|_, _| 0.0), &axis, 1.05, &config)
+            .0
+            .unwrap();
+        assert!(level.tilt_deg() < 1e-6, "{level:?}");
+        let mut strip = cells(|i, _| 0.0005 * f64::from(i));
+        strip.faces.retain(|f| {
+            let y = strip.positions[f[0] as usize].y;
+            (0.0..0.1).contains(&y)
+        });
+        let faces = upward_faces_near_neck(&strip, &axis, 1.05, &config);
+        assert_eq!(support_slope(&faces, 1.0), Vector2::zeros());
+    }
+
+    /// A map whose frame is tilted 0.8° (its state estimate's attitude error) holds the rock's
+    /// support tilted as much: the contact is read in the support's plane, and α_min against
+    /// the map's up moves by the tilt, as a rigid rock's does.
+    #[test]
+    fn a_tilted_support_is_levelled_before_the_contact_is_read() {
+        let mut config = FragilityConfig::default();
+        // The ring's side below its top is not in the scan: its edge bounds nothing here.
+        config.scan.max_unseen_support_effect_deg = 90.0;
+        let mut level = open_scan();
+        add_flat_ring(&mut level, 0.96, std::f64::consts::TAU);
+        let tilt = Rotation3::from_axis_angle(&Vector3::x_axis(), 0.8_f64.to_radians());
+        let mut tilted = level.clone();
+        tilted.transform(&Isometry3::from_parts(
+            Translation3::identity(),
+            UnitQuaternion::from_rotation_matrix(&tilt),
+        ));
+        let (closed_level, level_analysis) = analyze_scan(&level, &config).unwrap();
+        let (closed, analysis) = analyze_scan(&tilted, &config).unwrap();
+        assert_eq!(closed_level.support_from_scan, Rotation3::identity());
+        assert!(
+            (closed.support_from_scan.angle().to_degrees() - 0.8).abs() < 0.02,
+            "levelled by {}°",
+            closed.support_from_scan.angle().to_degrees()
+        );
+        let r = &analysis.report;
+        assert!(
+            (r.support_tilt_deg - 0.8).abs() < 0.02,
+            "{}",
+            r.support_tilt_deg
+        );
+        // The contact is read in the tilted support's plane: in the scan's frame its height
+        // varies across it by the tilt, where a contact read in horizontal slabs is level.
+        let read = close_scan(&tilted, &config.scan).unwrap();
+        let in_scan_frame: Vec<Vector3<f64>> = read
+            .contact_polygon
+            .iter()
+            .map(|p| read.support_from_scan.inverse() * Vector3::from(*p))
+            .collect();
+        let span = |axis: usize| {
+            let values = in_scan_frame.iter().map(|p| p[axis]);
+            values.clone().fold(f64::MIN, f64::max) - values.fold(f64::MAX, f64::min)
+        };
+        let expected = span(1) * 0.8_f64.to_radians().tan();
+        assert!(
+            (span(2) - expected).abs() < 2e-4,
+            "contact heights span {} m, the tilted support {expected} m",
+            span(2)
+        );
+        // The report is in the scan's frame: the centre of mass is the level scan's, tilted.
+        let com = tilt * Vector3::from(level_analysis.report.center_of_mass);
+        assert!(
+            (Vector3::from(r.center_of_mass) - com).norm() < 2e-3,
+            "{:?} against {com:?}",
+            r.center_of_mass
+        );
+        let level_alpha = level_analysis.report.alpha_min_deg;
+        assert!(
+            (r.alpha_min_deg - (level_alpha - 0.8)).abs() < 0.15,
+            "α_min {} against {level_alpha} − 0.8",
+            r.alpha_min_deg
+        );
+        let area = level_analysis.report.contact_area_m2;
+        assert!(
+            (r.contact_area_m2 / area - 1.0).abs() < 0.02,
+            "{} m² against {area} m²",
+            r.contact_area_m2
+        );
+    }
+
     #[test]
     fn finds_the_neck_and_closes_the_rock() {
         let scan = open_scan();
@@ -2609,13 +2898,17 @@ mod tests {
             let a = span_rad * i as f64 / steps as f64;
             Point3::new((r * a.cos()) as f32, (r * a.sin()) as f32, z as f32)
         };
+        // Rings 2 cm wide, as a map's faces are small beside the support.
+        let radii: Vec<f64> = (0..=18).map(|k| 0.14 + 0.02 * f64::from(k)).collect();
         for i in 0..steps {
-            let base = scan.positions.len() as u32;
-            scan.positions
-                .extend([at(0.14, i), at(0.5, i), at(0.5, i + 1), at(0.14, i + 1)]);
-            // Counter-clockwise seen from above: the faces look up.
-            scan.faces
-                .extend([[base, base + 1, base + 2], [base, base + 2, base + 3]]);
+            for r in radii.windows(2) {
+                let base = scan.positions.len() as u32;
+                scan.positions
+                    .extend([at(r[0], i), at(r[1], i), at(r[1], i + 1), at(r[0], i + 1)]);
+                // Counter-clockwise seen from above: the faces look up.
+                scan.faces
+                    .extend([[base, base + 1, base + 2], [base, base + 2, base + 3]]);
+            }
         }
     }
 
@@ -2722,10 +3015,16 @@ mod tests {
         let neck_z = 1.0;
         for k in 0..10 {
             let level_z = neck_z - 0.03 - 0.0005 * f64::from(k);
-            let faces: Vec<(f64, f64, usize)> = (0..SECTORS)
+            let faces: Vec<UpwardFace> = (0..SECTORS)
                 .map(|s| {
                     let dz = if s < SECTORS / 2 { -0.002 } else { 0.002 };
-                    (level_z + dz, 0.01, s)
+                    let azimuth = (s as f64 + 0.5) / SECTORS as f64 * std::f64::consts::TAU;
+                    UpwardFace {
+                        z: level_z + dz,
+                        area_m2: 0.01,
+                        sector: s,
+                        xy: Point2::new(0.3 * azimuth.cos(), 0.3 * azimuth.sin()),
+                    }
                 })
                 .collect();
             let found = support_level(&faces, neck_z, &config, config.support_min_sectors)
@@ -3205,7 +3504,7 @@ mod tests {
     fn base_hidden_east(mut scan: TriangleMesh, half_angle_deg: f64) -> TriangleMesh {
         let positions = scan.positions.clone();
         scan.faces.retain(|f| {
-            let centre = f.iter().fold(nalgebra::Vector3::zeros(), |acc, &v| {
+            let centre = f.iter().fold(Vector3::zeros(), |acc, &v| {
                 acc + positions[v as usize].coords.cast::<f64>()
             }) / 3.0;
             let east = centre.y.atan2(centre.x).abs() < half_angle_deg.to_radians();

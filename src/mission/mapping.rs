@@ -851,7 +851,11 @@ pub fn finish_target(
     // places it to decimetres, in the map's frame (the estimate's over the keyframes); where
     // closing refused the contact, the same cut and patches without it.
     let centroid = match &closed {
-        Ok(closed) => closed.mesh.volume_properties().ok().map(|v| v.centroid),
+        Ok(closed) => closed
+            .mesh
+            .volume_properties()
+            .ok()
+            .map(|v| closed.support_from_scan.inverse() * v.centroid),
         Err(_) => scan_centroid(&mesh, &config.fragility.scan).ok(),
     };
     if let Some(centroid) = centroid {
