@@ -533,6 +533,7 @@ fn update_target(
             t["alpha_min_low_deg"] = r.alpha_min_low_deg.into();
             t["alpha_min_high_deg"] = r.alpha_min_high_deg.into();
             t["toppling_pga_g"] = r.toppling_pga_g.into();
+            t["support_tilt_deg"] = r.support_tilt_deg.into();
             t["alpha_error_deg"] = (r.alpha_min_deg - truth.alpha_min_deg).abs().into();
             if fragility_error {
                 t["error"] = serde_json::Value::Null;
@@ -545,6 +546,7 @@ fn update_target(
                 "alpha_min_low_deg",
                 "alpha_min_high_deg",
                 "toppling_pga_g",
+                "support_tilt_deg",
                 "alpha_error_deg",
             ] {
                 t[key] = serde_json::Value::Null;

@@ -162,6 +162,10 @@ pub struct TargetRow {
     /// ended, where read (`map_patched_fraction`).
     #[serde(default)]
     pub map_patched_fraction: Option<f64>,
+    /// The support plane's tilt from the map's up the analysis levelled, degrees, where
+    /// analysed (`support_tilt_deg`).
+    #[serde(default)]
+    pub support_tilt_deg: Option<f64>,
     /// Collisions of the whole run.
     pub run_collisions: Option<u64>,
     /// Why it is not mapped or not analysed, from the mission.
@@ -443,6 +447,7 @@ pub fn read_run(
             reacquisitions: u(t, "reacquisitions"),
             map_frame_refusals: u(t, "map_frame_refusals"),
             map_patched_fraction: f(t, "map_patched_fraction"),
+            support_tilt_deg: f(t, "support_tilt_deg"),
             run_collisions: run_row.collisions,
             error: s(t, "error"),
         });
@@ -657,6 +662,13 @@ pub fn totals(runs: &[RunRow], targets: &[TargetRow]) -> Totals {
             counted
                 .iter()
                 .filter_map(|t| Some((t.map_patched_fraction?, at(t)))),
+        ),
+        figure(
+            "support plane's tilt from the map's up, levelled before the contact is read (°)",
+            true,
+            counted
+                .iter()
+                .filter_map(|t| Some((t.support_tilt_deg?, at(t)))),
         ),
         figure(
             "α_min interval width (°)",

@@ -111,7 +111,7 @@ pub struct MinimumSupport {
 
 /// Whether `p` lies inside or on the convex counter-clockwise `polygon` (false for fewer than
 /// three points).
-fn contains(polygon: &[Point2<f64>], p: &Point2<f64>) -> bool {
+pub(crate) fn contains(polygon: &[Point2<f64>], p: &Point2<f64>) -> bool {
     let n = polygon.len();
     n >= 3 && (0..n).all(|k| orient(&polygon[k], &polygon[(k + 1) % n], p) >= 0.0)
 }

@@ -874,6 +874,7 @@ pub fn finish_target(
             report.alpha_min_deg = Some(r.alpha_min_deg);
             report.alpha_min_low_deg = Some(r.alpha_min_low_deg);
             report.alpha_min_high_deg = Some(r.alpha_min_high_deg);
+            report.support_tilt_deg = Some(r.support_tilt_deg);
             report.toppling_pga_g = Some(r.toppling_pga_g);
             report.size_m = Some(r.rock_height_m);
             let json = serde_json::to_string_pretty(r)?;

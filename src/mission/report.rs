@@ -83,6 +83,11 @@ pub struct TargetReport {
     /// was not read (the cells never ended mapping, or the map could not be cut).
     #[serde(default)]
     pub map_patched_fraction: Option<f64>,
+    /// The tilt of the rock's support plane from the map's up, degrees, where the rock was
+    /// analysed (`fragility.json`'s `support_tilt_deg`; 0 below the tilt it is levelled from):
+    /// on a level pedestal, the map frame's tilt from gravity, which α_min takes in full.
+    #[serde(default)]
+    pub support_tilt_deg: Option<f64>,
     /// Mesh size.
     pub triangles: usize,
     /// Rock height from the mesh, metres.
