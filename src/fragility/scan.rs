@@ -558,7 +558,8 @@ impl SupportPlane {
     }
 }
 
-/// The support's top under a scanned rock, as `(plane, partial)`: the plane is the support
+/// The support's top under a scanned rock, among its upward faces near the neck
+/// ([`upward_faces_near_neck`]), as `(plane, partial)`: the plane is the support
 /// level ([`support_level`]) seen in [`ScanConfig::support_min_sectors`], the partial one that
 /// seen in [`ScanConfig::partial_support_min_sectors`], kept only where no plane stands within
 /// [`SUPPORT_ROUGHNESS_BAND_M`] of it. A partial level farther above the plane than that is
@@ -569,14 +570,12 @@ impl SupportPlane {
 /// its top (a noisy scan of library-b's wide block, fused with true poses: neck 6.7 cm under its
 /// top seen in 6 of 12 directions, α_min read at the neck 51.6° against 17.5°).
 fn support_top(
-    mesh: &TriangleMesh,
-    axis_xy: &Point2<f64>,
+    faces: &[UpwardFace],
     neck_z: f64,
     config: &ScanConfig,
 ) -> (Option<SupportPlane>, Option<SupportPlane>) {
-    let faces = upward_faces_near_neck(mesh, axis_xy, neck_z, config);
-    let full = support_level(&faces, neck_z, config, config.support_min_sectors);
-    let half = support_level(&faces, neck_z, config, config.partial_support_min_sectors);
+    let full = support_level(faces, neck_z, config, config.support_min_sectors);
+    let half = support_level(faces, neck_z, config, config.partial_support_min_sectors);
     match (full, half) {
         (_, Some(h)) if h.height_m > neck_z + SUPPORT_ROUGHNESS_BAND_M => (Some(h), None),
         (Some(f), Some(h)) if h.height_m > f.height_m + SUPPORT_ROUGHNESS_BAND_M => (None, Some(h)),
@@ -1828,6 +1827,8 @@ pub fn patched_fraction(mesh: &TriangleMesh, config: &ScanConfig) -> Result<f64,
 struct CutRock {
     rock: TriangleMesh,
     neck_z: f64,
+    /// The scan's upward faces near the neck, the support is read from.
+    support_faces: Vec<UpwardFace>,
     support_plane: Option<SupportPlane>,
     partial_support: Option<SupportPlane>,
     contact_height_m: f64,
@@ -1842,7 +1843,8 @@ struct CutRock {
 fn cut_rock(mesh: &TriangleMesh, config: &ScanConfig) -> Result<CutRock, FragilityError> {
     config.validate()?;
     let (neck_z, axis_xy) = find_neck(mesh, config)?;
-    let (support_plane, partial_support) = support_top(mesh, &axis_xy, neck_z, config);
+    let support_faces = upward_faces_near_neck(mesh, &axis_xy, neck_z, config);
+    let (support_plane, partial_support) = support_top(&support_faces, neck_z, config);
     let plane_z = support_plane.map(|p| p.height_m);
     let contact_height_m = plane_z.unwrap_or(neck_z);
     let cut_z = plane_z.map_or(neck_z, |z| z + config.cut_above_support_m);
@@ -1887,6 +1889,7 @@ fn cut_rock(mesh: &TriangleMesh, config: &ScanConfig) -> Result<CutRock, Fragili
     Ok(CutRock {
         rock,
         neck_z,
+        support_faces,
         support_plane,
         partial_support,
         contact_height_m,
@@ -1960,12 +1963,7 @@ pub fn close_scan(mesh: &TriangleMesh, config: &ScanConfig) -> Result<ClosedScan
     let Some(support_from_scan) = closed.support_plane.as_ref().and_then(levelling) else {
         return Ok(closed);
     };
-    let mut levelled = mesh.clone();
-    levelled.transform(&Isometry3::from_parts(
-        Translation3::identity(),
-        UnitQuaternion::from_rotation_matrix(&support_from_scan),
-    ));
-    match close_scan_as_it_stands(&levelled, config) {
+    match close_scan_as_it_stands(&rotated(mesh, &support_from_scan), config) {
         Ok(levelled) => Ok(ClosedScan {
             support_from_scan,
             ..levelled
@@ -1977,6 +1975,16 @@ pub fn close_scan(mesh: &TriangleMesh, config: &ScanConfig) -> Result<ClosedScan
             Ok(closed)
         }
     }
+}
+
+/// `mesh` rotated about the origin by `b_from_a`.
+fn rotated(mesh: &TriangleMesh, b_from_a: &Rotation3<f64>) -> TriangleMesh {
+    let mut mesh = mesh.clone();
+    mesh.transform(&Isometry3::from_parts(
+        Translation3::identity(),
+        UnitQuaternion::from_rotation_matrix(b_from_a),
+    ));
+    mesh
 }
 
 /// The rotation that levels `support` ([`close_scan`]), when its tilt is one to level.
@@ -1996,6 +2004,7 @@ fn close_scan_as_it_stands(
     let CutRock {
         mut rock,
         neck_z,
+        support_faces,
         support_plane,
         partial_support,
         contact_height_m,
@@ -2017,12 +2026,12 @@ fn close_scan_as_it_stands(
             .as_ref()
             .and_then(|o| o.hull(OutlineGaps::Interpolated))
             .map_or_else(Vector2::zeros, |top| {
-                let faces: Vec<UpwardFace> =
-                    upward_faces_near_neck(mesh, &profile.axis_xy, neck_z, config)
-                        .into_iter()
-                        .filter(|f| super::rocking::contains(&top, &f.xy))
-                        .collect();
-                support_slope(&faces, plane.height_m)
+                let on_top: Vec<UpwardFace> = support_faces
+                    .iter()
+                    .filter(|f| super::rocking::contains(&top, &f.xy))
+                    .copied()
+                    .collect();
+                support_slope(&on_top, plane.height_m)
             })
             .into(),
         ..plane
@@ -2089,12 +2098,7 @@ const CUT_LOOP_BAND_M: f64 = 0.03;
 impl ClosedScan {
     /// The closed rock ([`ClosedScan::mesh`]) in the input scan's frame, metres.
     pub fn mesh_in_scan_frame(&self) -> TriangleMesh {
-        let mut mesh = self.mesh.clone();
-        mesh.transform(&Isometry3::from_parts(
-            Translation3::identity(),
-            UnitQuaternion::from_rotation_matrix(&self.support_from_scan.inverse()),
-        ));
-        mesh
+        rotated(&self.mesh, &self.support_from_scan.inverse())
     }
 
     /// The patches over parts of the rock no camera saw: every filled loop but the cut's.
@@ -2727,19 +2731,24 @@ mod tests {
     fn the_support_roughness_is_the_spread_of_its_top() {
         let config = ScanConfig::default();
         let axis = Point2::origin();
-        let flat = support_top(&cells(|_, _| 0.0), &axis, 1.05, &config)
-            .0
-            .unwrap();
+        let top_of = |mesh: &TriangleMesh| {
+            support_top(
+                &upward_faces_near_neck(mesh, &axis, 1.05, &config),
+                1.05,
+                &config,
+            )
+        };
+        let flat = top_of(&cells(|_, _| 0.0)).0.unwrap();
         assert!((flat.height_m - 1.0).abs() < 1e-6, "{flat:?}");
         assert!(flat.roughness_m < 1e-6, "{flat:?}");
         let step = |i: i32, j: i32| if (i + j) % 2 == 0 { 0.006 } else { -0.006 };
-        let rough = support_top(&cells(step), &axis, 1.05, &config).0.unwrap();
+        let rough = top_of(&cells(step)).0.unwrap();
         assert!((rough.height_m - 1.006).abs() < 1e-5, "{rough:?}");
         assert!((rough.roughness_m - 0.006).abs() < 2e-4, "{rough:?}");
         assert!((rough.height_sigma_m(0.002) - 0.00632).abs() < 2e-4);
         // Cells 4 cm off the plane are the ground or the rock, not the support's roughness.
         let far = |i: i32, j: i32| if (i + j) % 2 == 0 { 0.0 } else { -0.04 };
-        let far = support_top(&cells(far), &axis, 1.05, &config).0.unwrap();
+        let far = top_of(&cells(far)).0.unwrap();
         assert!(far.roughness_m < 1e-6, "{far:?}");
     }
 
@@ -2788,11 +2797,7 @@ mod tests {
             (1.8, 0.42),
         ]);
         let tilt = Rotation3::from_axis_angle(&Vector3::x_axis(), 0.8_f64.to_radians());
-        let mut tilted = level.clone();
-        tilted.transform(&Isometry3::from_parts(
-            Translation3::identity(),
-            UnitQuaternion::from_rotation_matrix(&tilt),
-        ));
+        let tilted = rotated(&level, &tilt);
         let (closed_level, level_analysis) = analyze_scan(&level, &config).unwrap();
         let (closed, analysis) = analyze_scan(&tilted, &config).unwrap();
         assert_eq!(closed_level.support_from_scan, Rotation3::identity());
@@ -2931,17 +2936,13 @@ mod tests {
             let a = span_rad * i as f64 / steps as f64;
             Point3::new((r * a.cos()) as f32, (r * a.sin()) as f32, z as f32)
         };
-        // Rings 2 cm wide, as a map's faces are small beside the support.
-        let radii: Vec<f64> = (0..=18).map(|k| 0.14 + 0.02 * f64::from(k)).collect();
         for i in 0..steps {
-            for r in radii.windows(2) {
-                let base = scan.positions.len() as u32;
-                scan.positions
-                    .extend([at(r[0], i), at(r[1], i), at(r[1], i + 1), at(r[0], i + 1)]);
-                // Counter-clockwise seen from above: the faces look up.
-                scan.faces
-                    .extend([[base, base + 1, base + 2], [base, base + 2, base + 3]]);
-            }
+            let base = scan.positions.len() as u32;
+            scan.positions
+                .extend([at(0.14, i), at(0.5, i), at(0.5, i + 1), at(0.14, i + 1)]);
+            // Counter-clockwise seen from above: the faces look up.
+            scan.faces
+                .extend([[base, base + 1, base + 2], [base, base + 2, base + 3]]);
         }
     }
 
