@@ -2,7 +2,7 @@
 """Fragility on rocks no one tuned against: random shapes, scanned with true poses.
 
 usage: fresh_shapes.py --bin SCARP --out DIR [--seeds 1-4] [--count 16] [--no-noise] [--jobs 2]
-                       [--rescore SCARP] [--config FRAGILITY.toml] [--exact]
+                       [--rescore SCARP] [--config FRAGILITY.toml] [--exact] [--low-ring]
 
 Draws `--count` rocks from each of `--seeds` (`1-4`, or `1,3`): procedural boulders and blocks (random size, squareness,
 roughness, facets) and the built-in scanned stones, each at a random yaw, four in ten tilted
@@ -121,13 +121,17 @@ def quaternion(r):
     return (*q, (r[k][j] - r[j][k]) / s)
 
 
-def rings(height_m, path):
+def rings(height_m, path, low_ring=False):
     """Writes the two rings round the rock on the origin as a TUM trajectory (camera in world,
-    OpenCV axes: x right, y down, z forward)."""
+    OpenCV axes: x right, y down, z forward); with `low_ring`, a third of 36 views 3 cm above the
+    pedestal's top, 1.5 m out, looking level (under an overhang the other two do not see)."""
     lines, t = [], 0.0
     top = PEDESTAL_M + height_m
-    for z, radius, look_z, n in [(PEDESTAL_M + 0.2, 2.0, PEDESTAL_M + 0.05, 36),
-                                 (top + 0.8, 2.4, PEDESTAL_M + height_m / 2, 24)]:
+    plan = [(PEDESTAL_M + 0.2, 2.0, PEDESTAL_M + 0.05, 36)]
+    if low_ring:
+        plan.append((PEDESTAL_M + 0.03, 1.5, PEDESTAL_M + 0.03, 36))
+    plan.append((top + 0.8, 2.4, PEDESTAL_M + height_m / 2, 24))
+    for z, radius, look_z, n in plan:
         for k in range(n):
             a = 2 * math.pi * k / n
             eye = (radius * math.cos(a), radius * math.sin(a), z)
@@ -236,7 +240,7 @@ def make(args, rock):
         row["truth"] = truth["alpha_min_deg"]
         # The exact surfaces need no views: a world and its truth are enough.
         if not args.exact and not os.path.exists(p("map/mesh.ply")):
-            rings(height, p("rings.txt"))
+            rings(height, p("rings.txt"), args.low_ring)
             run(args.bin, "render", "--world", p("world.toml"), "--path", p("rings.txt"),
                 *(["--no-noise"] if args.no_noise else []), "--out", p("seq"))
             contact = json.load(open(p("gt/world.json")))["rocks"][0]["contact"]["height_m"]
@@ -268,6 +272,8 @@ def main():
     ap.add_argument("--rescore", help="re-analyse the meshes in --out with this binary")
     ap.add_argument("--config", help="FragilityConfig TOML for the analysis")
     ap.add_argument("--exact", action="store_true", help="analyse the world's exact surfaces")
+    ap.add_argument("--low-ring", action="store_true",
+                    help="a third ring 3 cm above the pedestal's top, 1.5 m out (new maps only)")
     args = ap.parse_args()
     args.bin = os.path.abspath(args.bin)
     with ThreadPoolExecutor(args.jobs) as pool:
