@@ -27,28 +27,19 @@ import json
 import math
 import os
 import subprocess
+import sys
 import tempfile
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-
-def rotation(q):
-    x, y, z, w = q
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from kf_jumps import read_tum  # noqa: E402
 
 
 def tum(path):
     """{timestamp: world_from_camera rotation} of a TUM file."""
-    out = {}
-    for line in open(path):
-        if line.startswith("#") or not line.strip():
-            continue
-        f = [float(v) for v in line.split()]
-        out[round(f[0], 4)] = rotation(f[4:8])
-    return out
+    return {round(t, 4): np.array(r) for t, _, r in read_tum(path)}
 
 
 def mean_rotation(pairs):
