@@ -143,6 +143,9 @@ def spread(name, values):
 
 def totals(name, readings):
     ok = [r for r in readings if r]
+    if not ok:
+        print(f"{name}: {len(readings)} meshes, all refused")
+        return
     errors = np.array([a - t for t, a, _, _ in ok])
     widths = sorted(hi - lo for _, _, lo, hi in ok)
     print(f"{name}: {len(readings)} meshes, refused {len(readings) - len(ok)}, "
