@@ -323,6 +323,40 @@ fn the_monitor_flies_out_a_vertical_estimator_bias() {
     assert!(unmonitored_min < min, "{json:#}");
 }
 
+/// The neck ring (`planning.mapping.neck_ring`, off by default): flown once the rings end, 3 cm
+/// over the neck the map shows (the small world's rock stands on a 1 m pedestal), below the
+/// mission's 1.5 m clearance. The flight stays clear and the target is mapped.
+#[test]
+fn the_neck_ring_is_flown_at_the_neck_and_the_flight_stays_clear() {
+    let (json, stderr) = simulate_small(
+        "max_targets = 1\n[planning.mapping.neck_ring]\nenabled = true\n",
+        &[],
+    );
+    assert_eq!(json["end_reason"], "target_limit", "{stderr}");
+    assert!(stderr.contains("flying the neck ring"), "{stderr}");
+    assert_eq!(json["collisions"], 0, "{:#}", json["safety_events"]);
+    let min = json["min_clearance_m"].as_f64().unwrap();
+    assert!(min >= 0.5, "true min clearance {min}");
+    let target = &json["targets"][0];
+    assert_eq!(target["status"], "mapped", "{target:#}");
+    assert!(target["fscore_2cm"].as_f64().unwrap() > 0.85, "{target:#}");
+    let neck = &target["neck_ring"];
+    assert!(neck["not_flown"].is_null(), "{neck:#}");
+    let (neck_z, ring_z) = (
+        neck["neck_z_m"].as_f64().unwrap(),
+        neck["ring_z_m"].as_f64().unwrap(),
+    );
+    // 3 cm over the neck, lifted by the terrain at most 0.3 m.
+    assert!(
+        (0.03 - 1e-9..=0.33 + 1e-9).contains(&(ring_z - neck_z)),
+        "{neck:#}"
+    );
+    // It flew below the mission's clearance (the other rings keep 1.5 m), which only the neck
+    // ring does.
+    let map_min = json["min_clearance_by_mode_m"]["map"].as_f64().unwrap();
+    assert!(map_min < 1.4, "map mode's true min clearance {map_min}");
+}
+
 /// A collision ends the flight: `crashed`, with the event and a WARN line.
 #[test]
 fn a_collision_ends_the_flight() {

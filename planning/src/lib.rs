@@ -111,6 +111,38 @@ impl PlanningConfig {
             &self.clearance,
         )
     }
+
+    /// [`mapping_rings::plan_neck_ring_clear`] with this configuration's camera, rings and
+    /// clearance: the neck ring around `cylinder` at the neck `neck_z_m` (world z, m), from
+    /// `start`.
+    ///
+    /// # Errors
+    /// Those of [`mapping_rings::plan_neck_ring_clear`].
+    pub fn neck_ring_around(
+        &self,
+        cylinder: &geometry::VerticalCylinder,
+        start: &geometry::Waypoint,
+        neck_z_m: f64,
+        env: &clearance::Environment,
+    ) -> Result<mapping_rings::RingPlan, PlanError> {
+        mapping_rings::plan_neck_ring_clear(
+            cylinder,
+            start,
+            &self.camera,
+            &self.mapping,
+            neck_z_m,
+            env,
+            &self.clearance,
+        )
+    }
+
+    /// This configuration with the clearance the neck ring keeps
+    /// ([`mapping_rings::NeckRingConfig::min_clearance_m`]), to fly its plan with.
+    pub fn for_neck_ring(&self) -> Self {
+        let mut low = *self;
+        low.clearance.min_clearance_m = self.mapping.neck_ring.min_clearance_m;
+        low
+    }
 }
 
 /// The types and functions most callers need.
@@ -132,7 +164,8 @@ pub mod prelude {
     pub use crate::flight::{FlightConfig, FlightMetrics, FlightResult, Simulator, fly_trajectory};
     pub use crate::geometry::{Path, PointSetPca, VerticalCylinder, Waypoint};
     pub use crate::mapping_rings::{
-        MappingRingConfig, RingPlan, plan_mapping_rings, plan_mapping_rings_clear,
+        MappingRingConfig, NeckRingConfig, RingPlan, plan_mapping_rings, plan_mapping_rings_clear,
+        plan_neck_ring_clear,
     };
     pub use crate::minsnap::{FlatState, MinSnapConfig, StartState, Trajectory, plan_min_snap};
     pub use crate::terrain::{Heightfield, Obstacle};

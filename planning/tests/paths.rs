@@ -730,3 +730,63 @@ fn exit_backs_away_from_an_overhang_before_climbing() {
     let a = plan.start_azimuth_rad;
     assert!((up - Point3::new(1.5 * a.cos(), 1.5 * a.sin(), 6.0)).norm() < 1e-12);
 }
+
+/// Flat ground at z = 0 and a rock's cylinder whose bottom is 0.2 m under it, from a start
+/// beside the rings' top.
+fn rock_on_flat_ground() -> (Environment, VerticalCylinder, Waypoint) {
+    let terrain = Heightfield::flat(-20.0, -20.0, 0.5, 81, 81, 0.0).unwrap();
+    (
+        Environment::new(Some(terrain), &[]).unwrap(),
+        VerticalCylinder::new(0.0, 0.0, 0.8, -0.2, 2.5).unwrap(),
+        Waypoint::new(Point3::new(-2.3, 0.0, 3.5), 0.0),
+    )
+}
+
+#[test]
+fn neck_ring_flies_at_the_neck_and_climbs_back_to_the_clearance() {
+    let (env, cyl, start) = rock_on_flat_ground();
+    let mut cfg = PlanningConfig::default();
+    cfg.mapping.neck_ring.enabled = true;
+    let plan = cfg.neck_ring_around(&cyl, &start, 1.1, &env).unwrap();
+    assert_eq!(plan.rings.len(), 1, "{:?}", plan.rings);
+    let ring = plan.rings[0];
+    assert!((ring.z_m - 1.13).abs() < 1e-9, "{ring:?}");
+    assert_eq!(ring.camera_pitch_down_deg, 20.0);
+    assert!(ring.is_full_turn());
+    assert!((ring.radius_m - 2.3).abs() < 1e-9, "{ring:?}");
+    // 1.13 m over flat ground is above the ring's 1 m clearance and its margin: no lift.
+    for w in &plan.path.waypoints[plan.ring_waypoints[0].clone()] {
+        assert!((w.position_m.z - 1.13).abs() < 1e-9, "{w:?}");
+        let r = w.position_m.x.hypot(w.position_m.y);
+        assert!((r - 2.3).abs() < 1e-9, "{w:?}");
+    }
+    // Then straight up to the mission's 1.5 m clearance plus the terrain margin.
+    let ring_end = plan.path.waypoints[plan.ring_waypoints[0].end - 1];
+    let last = *plan.path.waypoints.last().unwrap();
+    assert!((last.position_m.z - 1.6).abs() < 1e-9, "{last:?}");
+    assert!((last.position_m.xy() - ring_end.position_m.xy()).norm() < 1e-9);
+    // Flown with the neck ring's clearance; the mission's own would refuse it.
+    common::clear_trajectory_from_rest(&plan.path, &env, &cfg.for_neck_ring());
+    assert!(!env.check_path(&plan.path, &cfg.clearance).is_clear());
+}
+
+#[test]
+fn a_rock_on_the_ground_gets_no_neck_ring_and_bad_necks_are_refused() {
+    let (env, cyl, start) = rock_on_flat_ground();
+    let mut cfg = PlanningConfig::default();
+    cfg.mapping.neck_ring.enabled = true;
+    // A neck 0.15 m up: the ring would follow the ground at 1.1 m, 0.92 m above the neck.
+    match cfg.neck_ring_around(&cyl, &start, 0.15, &env) {
+        Err(PlanError::TerrainLift { lift_m, .. }) => {
+            assert!((lift_m - 0.92).abs() < 1e-6, "{lift_m}")
+        }
+        other => panic!("unexpected {other:?}"),
+    }
+    let err = cfg
+        .neck_ring_around(&cyl, &start, f64::NAN, &env)
+        .unwrap_err();
+    assert!(err.to_string().contains("neck"), "{err}");
+    cfg.mapping.neck_ring.enabled = false;
+    let err = cfg.neck_ring_around(&cyl, &start, 1.1, &env).unwrap_err();
+    assert!(err.to_string().contains("disabled"), "{err}");
+}

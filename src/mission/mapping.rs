@@ -37,7 +37,9 @@ use crate::evaluation::mesh::{MeshEvalConfig, MeshEvaluation, Visibility, evalua
 use crate::evaluation::trajectory::{
     Alignment, TrajectoryEvalConfig, evaluate_trajectory, umeyama,
 };
-use crate::fragility::scan::{analyze_closed_scan, close_scan, patched_fraction, scan_centroid};
+use crate::fragility::scan::{
+    analyze_closed_scan, close_scan, find_scan_neck, patched_fraction, scan_centroid,
+};
 use crate::fragility::{ContactSpec, analyze};
 use crate::localization::silhouette::center_in_box;
 
@@ -511,6 +513,19 @@ impl MappingSession {
                 .patched_check
                 .and_then(|(_, share)| share)
                 .is_none_or(|share| share <= coverage.max_patched_fraction)
+    }
+
+    /// The neck of the rock in the map so far ([`find_scan_neck`]), world z in the frame the
+    /// vehicle flies in (m), for the neck ring.
+    ///
+    /// # Errors
+    /// A message when the map is empty or shows no neck (a rock sitting on the ground).
+    pub fn neck_height_m(&self, config: &MissionConfig) -> Result<f64, String> {
+        if self.is_empty() {
+            return Err("nothing mapped".into());
+        }
+        let mesh = extract_mesh(self.tracker.volume(), &config.mapping.meshing());
+        find_scan_neck(&mesh, &config.fragility.scan).map_err(|e| format!("the map's neck: {e}"))
     }
 
     /// The rock's patched share at the last reading by [`Self::ends_mapping`] (`None` before

@@ -11,6 +11,24 @@ use scarp_export::atomic::{write_atomically, write_bytes_atomically};
 use scarp_export::geojson::{EnuFrame, Geodetic, PointFeature, write_geojson};
 use serde::{Deserialize, Serialize};
 
+/// The neck ring of one target in `mission.json`
+/// ([`scarp_planning::prelude::NeckRingConfig`]), in the frame the vehicle flies in.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct NeckRingReport {
+    /// The neck the map showed when the other rings ended (z, m); `None` where it could not be
+    /// read.
+    pub neck_z_m: Option<f64>,
+    /// The ring's planned height (its lowest, where it follows the terrain; z, m); `None` when
+    /// it was not flown.
+    pub ring_z_m: Option<f64>,
+    /// How far round the axis it was flown (degrees; less than 360 where trimmed).
+    pub span_deg: f64,
+    /// How it was changed to keep clear of terrain and rocks.
+    pub repairs: Vec<scarp_planning::prelude::Repair>,
+    /// Why it was not flown.
+    pub not_flown: Option<String>,
+}
+
 /// One target in `mission.json`. Ground-truth fields are `null` without ground truth.
 #[derive(Debug, Clone, Default, Serialize, Deserialize)]
 pub struct TargetReport {
@@ -65,6 +83,10 @@ pub struct TargetReport {
     pub base_ring_flown: bool,
     /// How the mapping rings were changed to keep clear of terrain and rocks.
     pub ring_repairs: Vec<scarp_planning::prelude::Repair>,
+    /// The neck ring, planned from the map once the other rings were flown (`None` before it
+    /// was tried, or when mapping ended otherwise).
+    #[serde(default)]
+    pub neck_ring: Option<NeckRingReport>,
     /// Fraction of the cylinder's cells seen.
     pub coverage: f64,
     /// Fraction of the cylinder's bottom band seen (the base).

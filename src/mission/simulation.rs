@@ -31,7 +31,7 @@ use super::mount::CameraMount;
 use super::navigation::{MapFrameOffset, RingDrift};
 use super::perception::{Perception, TargetState};
 use super::record::{FlightOrigin, FlightRecorder};
-use super::report::{MissionReport, ModeChange, StageTimings};
+use super::report::{MissionReport, ModeChange, NeckRingReport, StageTimings};
 use super::safety::SafetyLog;
 use super::sensors::{Sensors, Simulated};
 
@@ -87,6 +87,17 @@ pub struct Progress {
     pub targets_mapped: usize,
 }
 
+/// Where the target being mapped is with its neck ring ([`scarp_planning::prelude::NeckRingConfig`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum NeckRingStage {
+    /// The other rings are being flown.
+    Pending,
+    /// The neck ring is being flown: mapping ends with its trajectory.
+    Flying,
+    /// Flown, or tried and not flown.
+    Done,
+}
+
 /// The running mission: vehicle, sensors, perception, targets and logs.
 pub struct Mission<'a> {
     inputs: MissionInputs<'a>,
@@ -118,6 +129,8 @@ pub struct Mission<'a> {
     last_depth: Option<(scarp_slam::image::DepthImage, Isometry3<f64>)>,
     /// Where the first frames of the target being mapped see it, before its map starts.
     recentering: Recentering,
+    /// The target being mapped: whether its neck ring is yet to come, flying, or done.
+    neck_ring: NeckRingStage,
     /// Per perception target: the sum of the estimator's position error (estimate − truth) over
     /// the frames that updated its localization, and their count (ground-truth bookkeeping).
     estimator_error_by_target: EstimatorErrorByTarget,
@@ -214,6 +227,7 @@ impl<'a> Mission<'a> {
             crashed: false,
             last_depth: None,
             recentering: Recentering::default(),
+            neck_ring: NeckRingStage::Pending,
             estimator_error_by_target: EstimatorErrorByTarget::default(),
             inputs,
         })
@@ -447,7 +461,11 @@ impl<'a> Mission<'a> {
                             session.process(frame, &estimate, Some(&truth))?;
                             odometry_error = session.navigation_error_m();
                         }
-                        (session.ends_mapping(&self.inputs.config), odometry_error)
+                        // Flying the neck ring, the coverage no longer ends mapping, and
+                        // reading the map's patched share would mesh it every few frames.
+                        let complete = self.neck_ring != NeckRingStage::Flying
+                            && session.ends_mapping(&self.inputs.config);
+                        (complete, odometry_error)
                     }
                     None => (true, None),
                 };
@@ -460,7 +478,8 @@ impl<'a> Mission<'a> {
                     self.ring_drift.observe(&self.navigation_error_m());
                 }
                 timings.map_s += clock.elapsed().as_secs_f64();
-                if complete || self.sensors.vehicle().trajectory_done() {
+                let done = self.sensors.vehicle().trajectory_done();
+                if (complete || done) && !self.start_neck_ring(id, timings) {
                     self.finish_mapping(id, timings)?;
                     if self.target_limit_reached() {
                         tracing::info!(
@@ -859,6 +878,7 @@ impl<'a> Mission<'a> {
             Ok(rings) => {
                 self.adopt_rings(id, rings);
                 self.recentering = Recentering::default();
+                self.neck_ring = NeckRingStage::Pending;
                 self.ring_drift = RingDrift::default();
                 self.map_frame.take_rejected();
                 self.mapping = Some(MappingSession::new(
@@ -877,6 +897,82 @@ impl<'a> Mission<'a> {
                     m.report.error = Some(format!("mapping rings: {e:#}"));
                 }
                 self.resume_search(timings)
+            }
+        }
+    }
+
+    /// Once the other rings are done: plans the neck ring from the map's neck and flies it,
+    /// returning true while it is flown. False (mapping ends) once it has been tried, when it
+    /// is disabled, or when the map shows no neck or the ring cannot be planned clear; the
+    /// report says why.
+    fn start_neck_ring(&mut self, id: u32, timings: &mut StageTimings) -> bool {
+        if self.neck_ring != NeckRingStage::Pending {
+            return false;
+        }
+        self.neck_ring = NeckRingStage::Done;
+        let config = &self.inputs.config;
+        if !config.planning.mapping.neck_ring.enabled {
+            return false;
+        }
+        let (Some(session), Some(cylinder)) = (
+            self.mapping.as_ref(),
+            self.targets.get(&id).and_then(|m| m.cylinder),
+        ) else {
+            return false;
+        };
+        let clock = Instant::now();
+        let neck = session.neck_height_m(config);
+        let env = self.env.with_obstacles_moved(&self.navigation_error_m());
+        let here = self.sensors.vehicle().current_waypoint();
+        let planned = neck.clone().and_then(|neck_z_m| {
+            let plan = config
+                .planning
+                .neck_ring_around(&cylinder, &here, neck_z_m, &env)
+                .map_err(|e| format!("{e:#}"))?;
+            self.sensors
+                .vehicle_mut()
+                .follow(
+                    &plan.path.waypoints[1..],
+                    &env,
+                    &config.planning.for_neck_ring(),
+                )
+                .map_err(|e| format!("{e:#}"))?;
+            Ok((neck_z_m, plan))
+        });
+        timings.planning_s += clock.elapsed().as_secs_f64();
+        let t = self.sensors.vehicle().time_s();
+        let Some(m) = self.targets.get_mut(&id) else {
+            return false;
+        };
+        match planned {
+            Ok((neck_z_m, plan)) => {
+                let ring = plan.rings[0];
+                tracing::info!(
+                    "t = {t:.1} s, target {id}: flying the neck ring at z = {:.2} m, {:.2} m above \
+                     the map's neck, {:.0}° round",
+                    ring.z_m,
+                    ring.z_m - neck_z_m,
+                    ring.span_rad.to_degrees()
+                );
+                m.report.neck_ring = Some(NeckRingReport {
+                    neck_z_m: Some(neck_z_m),
+                    ring_z_m: Some(ring.z_m),
+                    span_deg: ring.span_rad.to_degrees(),
+                    repairs: plan.repairs.clone(),
+                    not_flown: None,
+                });
+                self.ring_plan = Some(plan);
+                self.neck_ring = NeckRingStage::Flying;
+                true
+            }
+            Err(reason) => {
+                tracing::info!("target {id}: no neck ring: {reason}");
+                m.report.neck_ring = Some(NeckRingReport {
+                    neck_z_m: neck.ok(),
+                    not_flown: Some(reason),
+                    ..NeckRingReport::default()
+                });
+                false
             }
         }
     }
