@@ -1159,8 +1159,9 @@ fn plan_clear_from_some_start(
 /// level ring `cfg.neck_ring.height_above_neck_m` above `neck_z_m` (the neck the map shows,
 /// world z, m), `cfg.standoff_m` out from the cylinder, following the terrain at
 /// `cfg.neck_ring.min_clearance_m` and repaired as the base ring is (widened, bent, trimmed to
-/// an arc), then a climb straight up to where `ccfg` (the mission's clearance) holds over the
-/// terrain, so the flight goes on from there as from any ring. Its path keeps
+/// an arc), then a move straight out from the axis by `cfg.standoff_m` (where that is clear)
+/// and a climb straight up to where `ccfg` (the mission's clearance) holds over the terrain and
+/// every obstacle, so the flight goes on from there as from any ring. Its path keeps
 /// `cfg.neck_ring.min_clearance_m` from `env`.
 ///
 /// # Errors
@@ -1211,7 +1212,31 @@ pub fn plan_neck_ring_clear(
         &low,
         RingSet::BaseOnly,
     )?;
-    let last = *plan.path.waypoints.last().expect("a plan has its start");
+    let ring_end = *plan.path.waypoints.last().expect("a plan has its start");
+    // The ring ends beside the rock, below its widest part, and the way back to the search
+    // climbs straight up on the state estimate, which walks: first back away, level, by the
+    // standoff (on the default world, seed 0, the climb from the ring itself passed 0.77 m
+    // from the rock).
+    let outward = (ring_end.position_m.xy() - cylinder.axis_point(0.0).xy())
+        .try_normalize(1e-6)
+        .unwrap_or_else(|| {
+            Vector2::new(plan.start_azimuth_rad.cos(), plan.start_azimuth_rad.sin())
+        });
+    let backed = Point3::new(
+        ring_end.position_m.x + outward.x * cfg.standoff_m,
+        ring_end.position_m.y + outward.y * cfg.standoff_m,
+        ring_end.position_m.z,
+    );
+    let backed = Waypoint::new(lifted_over_terrain(&backed, env, &low), ring_end.yaw_rad);
+    let last = if env
+        .check_path(&Path::new(vec![ring_end, backed]), &low)
+        .is_clear()
+    {
+        plan.path.waypoints.push(backed);
+        backed
+    } else {
+        ring_end
+    };
     let mut above = lifted_over_terrain(&last.position_m, env, ccfg);
     // Over the terrain is not enough: a pedestal's foot or a neighbour may lie within the
     // mission's clearance of the ring, and the flight goes on from here under that clearance.

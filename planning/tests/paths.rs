@@ -760,11 +760,22 @@ fn neck_ring_flies_at_the_neck_and_climbs_back_to_the_clearance() {
         let r = w.position_m.x.hypot(w.position_m.y);
         assert!((r - 2.3).abs() < 1e-9, "{w:?}");
     }
-    // Then straight up to the mission's 1.5 m clearance plus the terrain margin.
-    let ring_end = plan.path.waypoints[plan.ring_waypoints[0].end - 1];
-    let last = *plan.path.waypoints.last().unwrap();
+    // Then straight out by the standoff, level, and straight up to the mission's 1.5 m
+    // clearance plus the terrain margin.
+    let wps = &plan.path.waypoints;
+    assert_eq!(plan.ring_waypoints[0].end, wps.len() - 2, "{wps:?}");
+    let (ring_end, backed, last) = (wps[wps.len() - 3], wps[wps.len() - 2], wps[wps.len() - 1]);
+    let radius = |w: &Waypoint| w.position_m.x.hypot(w.position_m.y);
+    assert!((radius(&backed) - 3.8).abs() < 1e-9, "{backed:?}");
+    assert!((backed.position_m.z - 1.13).abs() < 1e-9, "{backed:?}");
+    let out = backed.position_m.xy().coords - ring_end.position_m.xy().coords;
+    assert!(
+        out.normalize()
+            .dot(&ring_end.position_m.xy().coords.normalize())
+            > 1.0 - 1e-9
+    );
     assert!((last.position_m.z - 1.6).abs() < 1e-9, "{last:?}");
-    assert!((last.position_m.xy() - ring_end.position_m.xy()).norm() < 1e-9);
+    assert!((last.position_m.xy() - backed.position_m.xy()).norm() < 1e-9);
     // Flown with the neck ring's clearance; the mission's own would refuse it.
     common::clear_trajectory_from_rest(&plan.path, &env, &cfg.for_neck_ring());
     assert!(!env.check_path(&plan.path, &cfg.clearance).is_clear());
