@@ -1165,7 +1165,8 @@ fn plan_clear_from_some_start(
 /// `cfg.neck_ring.min_clearance_m` from `env`.
 ///
 /// # Errors
-/// [`PlanError::InvalidParameter`] when the ring is disabled or `neck_z_m` is not finite;
+/// [`PlanError::InvalidParameter`] when the ring is disabled or `neck_z_m` is not finite or
+/// not inside the cylinder;
 /// [`PlanError::TerrainLift`] when the terrain lifts it more than
 /// `cfg.neck_ring.max_lift_above_neck_m` above the neck all round but for less than
 /// `cfg.base_ring.min_arc_deg` (a rock with no pedestal); otherwise those of
@@ -1188,6 +1189,17 @@ pub fn plan_neck_ring_clear(
         });
     }
     crate::error::check_finite("neck height", neck_z_m)?;
+    if neck_z_m <= cylinder.z_bottom_m || neck_z_m >= cylinder.z_top_m {
+        // A neck read at the foot of a scarp or under the ground is not the rock's.
+        return Err(PlanError::InvalidParameter {
+            field: "neck height".into(),
+            value: neck_z_m,
+            reason: format!(
+                "outside the target's cylinder, z {:.2}..{:.2} m",
+                cylinder.z_bottom_m, cylinder.z_top_m
+            ),
+        });
+    }
     let ring_cfg = MappingRingConfig {
         base_ring: BaseRingConfig {
             enabled: true,

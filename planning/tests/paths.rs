@@ -797,6 +797,11 @@ fn a_rock_on_the_ground_gets_no_neck_ring_and_bad_necks_are_refused() {
         .neck_ring_around(&cyl, &start, f64::NAN, &env)
         .unwrap_err();
     assert!(err.to_string().contains("neck"), "{err}");
+    // A neck under the cylinder's bottom (library-b seed 63 read one 1.5 m under it, at the
+    // foot of a scarp) is refused, named.
+    let err = cfg.neck_ring_around(&cyl, &start, -1.7, &env).unwrap_err();
+    assert!(err.to_string().contains("neck height"), "{err}");
+    assert!(err.to_string().contains("outside"), "{err}");
     cfg.mapping.neck_ring.enabled = false;
     let err = cfg.neck_ring_around(&cyl, &start, 1.1, &env).unwrap_err();
     assert!(err.to_string().contains("disabled"), "{err}");
