@@ -289,6 +289,23 @@ fn simulate_small(extra: &str, flags: &[&str]) -> (serde_json::Value, String) {
     (json, stderr)
 }
 
+/// Asserts that a one-target flight (`max_targets = 1`) ended at its target limit without a
+/// collision, kept a true clearance of 0.5 m, and mapped its target with F@2cm > 0.85; returns
+/// the true min clearance (m) and the target's report.
+fn flown_clear_and_mapped<'a>(
+    json: &'a serde_json::Value,
+    stderr: &str,
+) -> (f64, &'a serde_json::Value) {
+    assert_eq!(json["end_reason"], "target_limit", "{stderr}");
+    assert_eq!(json["collisions"], 0, "{:#}", json["safety_events"]);
+    let min = json["min_clearance_m"].as_f64().unwrap();
+    assert!(min >= 0.5, "true min clearance {min}");
+    let target = &json["targets"][0];
+    assert_eq!(target["status"], "mapped", "{target:#}");
+    assert!(target["fscore_2cm"].as_f64().unwrap() > 0.85, "{target:#}");
+    (min, target)
+}
+
 /// The state estimate reads 1.5 m above the truth all flight long. The rangefinder senses the
 /// error and the monitor removes it: no collision, the true clearance stays ≥ 0.5 m, and the
 /// target is mapped. The same flight with neither the monitor nor the map's frame (the rings
@@ -307,13 +324,7 @@ fn the_monitor_flies_out_a_vertical_estimator_bias() {
         )
     });
     let (json, stderr) = simulate_small(bias, &[]);
-    assert_eq!(json["end_reason"], "target_limit", "{stderr}");
-    assert_eq!(json["collisions"], 0, "{:#}", json["safety_events"]);
-    let min = json["min_clearance_m"].as_f64().unwrap();
-    assert!(min >= 0.5, "true min clearance {min}");
-    let target = &json["targets"][0];
-    assert_eq!(target["status"], "mapped", "{target:#}");
-    assert!(target["fscore_2cm"].as_f64().unwrap() > 0.85, "{target:#}");
+    let (min, _) = flown_clear_and_mapped(&json, &stderr);
 
     // Without the monitor the same flight breaks the 0.5 m the vehicle must keep (it came
     // within 0.27–0.36 m, colliding or not as the detector's draws place the rings).
@@ -332,14 +343,8 @@ fn the_neck_ring_is_flown_at_the_neck_and_the_flight_stays_clear() {
         "max_targets = 1\n[planning.mapping.neck_ring]\nenabled = true\n",
         &[],
     );
-    assert_eq!(json["end_reason"], "target_limit", "{stderr}");
     assert!(stderr.contains("flying the neck ring"), "{stderr}");
-    assert_eq!(json["collisions"], 0, "{:#}", json["safety_events"]);
-    let min = json["min_clearance_m"].as_f64().unwrap();
-    assert!(min >= 0.5, "true min clearance {min}");
-    let target = &json["targets"][0];
-    assert_eq!(target["status"], "mapped", "{target:#}");
-    assert!(target["fscore_2cm"].as_f64().unwrap() > 0.85, "{target:#}");
+    let (_, target) = flown_clear_and_mapped(&json, &stderr);
     let neck = &target["neck_ring"];
     assert!(neck["not_flown"].is_null(), "{neck:#}");
     let (neck_z, ring_z) = (
