@@ -167,10 +167,10 @@ impl BaseRingConfig {
 /// the ground, 0.3–0.7 m above a pedestal's top) and looks down at 20°, so under a rock that
 /// overhangs its pedestal the lowest centimetres of the base, which decide the contact, go
 /// unseen in many directions. This ring is planned once the other rings are flown, from the
-/// neck the map they built shows ([`plan_neck_ring_clear`]): level with it, a few centimetres
-/// above, looking level. It flies lower than the mission's clearance, down to
-/// `min_clearance_m`, because the safety monitor senses the ground and the rock round it; the
-/// ring's last waypoint climbs back to the mission's clearance.
+/// neck the map they built shows ([`plan_neck_ring_clear`]): a few centimetres above it. It
+/// flies lower than the mission's clearance, down to `min_clearance_m`, because the safety
+/// monitor senses the ground and the rock round it; the ring's path ends by backing out and
+/// climbing back to the mission's clearance.
 ///
 /// Measured (session 53, `fresh_shapes.py --low-ring`, 64 rocks the tuning never saw): such a
 /// ring 3 cm above the pedestal's top brought 8 of 12 mapped contacts read more than their
@@ -1224,6 +1224,25 @@ pub fn plan_neck_ring_clear(
         &low,
         RingSet::BaseOnly,
     )?;
+    append_neck_ring_exit(&mut plan, cylinder, cfg.standoff_m, env, &low, ccfg)?;
+    Ok(plan)
+}
+
+/// Appends the way out of a neck ring to `plan`: straight out from the axis by `standoff_m`,
+/// level (where that keeps `low`'s clearance), then straight up until `ccfg`'s clearance holds
+/// over the terrain and every obstacle (plus the terrain-following margin).
+///
+/// # Errors
+/// [`PlanError::Clearance`] when no climb within `ccfg.max_raise_m` clears, or the climb
+/// itself comes within `low`'s clearance.
+fn append_neck_ring_exit(
+    plan: &mut RingPlan,
+    cylinder: &VerticalCylinder,
+    standoff_m: f64,
+    env: &Environment,
+    low: &ClearanceConfig,
+    ccfg: &ClearanceConfig,
+) -> Result<(), PlanError> {
     let ring_end = *plan.path.waypoints.last().expect("a plan has its start");
     // The ring ends beside the rock, below its widest part, and the way back to the search
     // climbs straight up on the state estimate, which walks: first back away, level, by the
@@ -1235,13 +1254,13 @@ pub fn plan_neck_ring_clear(
             Vector2::new(plan.start_azimuth_rad.cos(), plan.start_azimuth_rad.sin())
         });
     let backed = Point3::new(
-        ring_end.position_m.x + outward.x * cfg.standoff_m,
-        ring_end.position_m.y + outward.y * cfg.standoff_m,
+        ring_end.position_m.x + outward.x * standoff_m,
+        ring_end.position_m.y + outward.y * standoff_m,
         ring_end.position_m.z,
     );
-    let backed = Waypoint::new(lifted_over_terrain(&backed, env, &low), ring_end.yaw_rad);
+    let backed = Waypoint::new(lifted_over_terrain(&backed, env, low), ring_end.yaw_rad);
     let last = if env
-        .check_path(&Path::new(vec![ring_end, backed]), &low)
+        .check_path(&Path::new(vec![ring_end, backed]), low)
         .is_clear()
     {
         plan.path.waypoints.push(backed);
@@ -1268,10 +1287,10 @@ pub fn plan_neck_ring_clear(
     if above.z > last.position_m.z + 1e-6 {
         let climb = Waypoint::new(above, last.yaw_rad);
         plan.path.waypoints.push(climb);
-        env.check_path(&Path::new(vec![last, climb]), &low)
+        env.check_path(&Path::new(vec![last, climb]), low)
             .ensure_clear("the climb from the neck ring")?;
     }
-    Ok(plan)
+    Ok(())
 }
 
 /// Where the rings may start, as turns (degrees, counter-clockwise seen from above) from the
