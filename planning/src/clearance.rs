@@ -372,6 +372,8 @@ impl ObstacleShape {
 pub struct Environment {
     terrain: Option<TerrainDistance>,
     obstacles: Vec<ObstacleShape>,
+    /// Taken off every obstacle's clearance (see [`Environment::with_obstacle_margin`]), m.
+    obstacle_margin_m: f64,
 }
 
 impl Environment {
@@ -385,7 +387,11 @@ impl Environment {
             .enumerate()
             .map(|(i, o)| ObstacleShape::new(i, o))
             .collect::<Result<Vec<_>, _>>()?;
-        Ok(Self { terrain, obstacles })
+        Ok(Self {
+            terrain,
+            obstacles,
+            obstacle_margin_m: 0.0,
+        })
     }
 
     /// An environment with nothing in it.
@@ -393,6 +399,7 @@ impl Environment {
         Self {
             terrain: None,
             obstacles: Vec::new(),
+            obstacle_margin_m: 0.0,
         }
     }
 
@@ -413,6 +420,30 @@ impl Environment {
         Self {
             terrain: self.terrain.clone(),
             obstacles,
+            obstacle_margin_m: self.obstacle_margin_m,
+        }
+    }
+
+    /// This environment with `margin_m` more taken off every obstacle's clearance than
+    /// already is (the terrain's is kept): a plan checked against it at a clearance `c` keeps
+    /// `c` from the terrain and `c + margin_m` from the rocks and pedestals. Downward ranges
+    /// ([`Self::range_below`]) are the surfaces' own.
+    ///
+    /// Why: near the ground the safety monitor measures the height and corrects the estimate's
+    /// vertical error, so a low ring may fly closer to the terrain; nothing measures the
+    /// horizontal error, the estimate's walk (σ 0.5 m for the GPS preset), so a rock beside
+    /// the ring needs the whole clearance (library-b, seed 62, session 55: a neck ring kept
+    /// 1.0 m from the block it circled in the frame it flew in, and passed 0.29 m from it in
+    /// truth). A non-finite or negative `margin_m` adds nothing.
+    pub fn with_obstacle_margin(&self, margin_m: f64) -> Self {
+        let margin_m = if margin_m.is_finite() {
+            margin_m.max(0.0)
+        } else {
+            0.0
+        };
+        Self {
+            obstacle_margin_m: self.obstacle_margin_m + margin_m,
+            ..self.clone()
         }
     }
 
@@ -467,10 +498,15 @@ impl Environment {
             // A farther obstacle cannot win (ties keep the earlier source, as `consider` does);
             // the bounding box's f64 distance is exact where the f32 projection rounds, so the
             // margin keeps the skip from changing a result that rounding would have decided.
-            if best.is_some_and(|b| o.clearance_lower_bound(p) > b.clearance_m + 1e-3) {
+            let margin_m = self.obstacle_margin_m;
+            if best.is_some_and(|b| o.clearance_lower_bound(p) - margin_m > b.clearance_m + 1e-3) {
                 continue;
             }
-            consider(&mut best, o.clearance(p), ClearanceSource::Obstacle(i));
+            consider(
+                &mut best,
+                o.clearance(p) - margin_m,
+                ClearanceSource::Obstacle(i),
+            );
         }
         best
     }

@@ -136,8 +136,16 @@ impl PlanningConfig {
         )
     }
 
-    /// This configuration with the clearance the neck ring keeps
-    /// ([`mapping_rings::NeckRingConfig::min_clearance_m`]), to fly its plan with.
+    /// What the neck ring's plan is flown against with [`Self::for_neck_ring`]: `env` with
+    /// this configuration's clearance kept from its obstacles
+    /// ([`mapping_rings::neck_ring_environment`]).
+    pub fn neck_ring_environment(&self, env: &clearance::Environment) -> clearance::Environment {
+        mapping_rings::neck_ring_environment(env, &self.mapping.neck_ring, &self.clearance)
+    }
+
+    /// This configuration with the clearance the neck ring keeps from the terrain
+    /// ([`mapping_rings::NeckRingConfig::min_clearance_m`]), to fly its plan with (against
+    /// [`Self::neck_ring_environment`]).
     pub fn for_neck_ring(&self) -> Self {
         let mut low = *self;
         low.clearance.min_clearance_m = self.mapping.neck_ring.min_clearance_m;

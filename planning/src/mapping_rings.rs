@@ -168,9 +168,11 @@ impl BaseRingConfig {
 /// overhangs its pedestal the lowest centimetres of the base, which decide the contact, go
 /// unseen in many directions. This ring is planned once the other rings are flown, from the
 /// neck the map they built shows ([`plan_neck_ring_clear`]): a few centimetres above it. It
-/// flies lower than the mission's clearance, down to `min_clearance_m`, because the safety
-/// monitor senses the ground and the rock round it; the ring's path ends by backing out and
-/// climbing back to the mission's clearance.
+/// flies lower over the terrain than the mission's clearance, down to `min_clearance_m`,
+/// because the safety monitor measures the height over the ground; it keeps the mission's
+/// clearance from rocks and pedestals, whose horizontal distance nothing measures
+/// ([`neck_ring_environment`]). The ring's path ends by backing out and climbing back to the
+/// mission's clearance.
 ///
 /// Measured (session 53, `fresh_shapes.py --low-ring`, 64 rocks the tuning never saw): such a
 /// ring 3 cm above the pedestal's top brought 8 of 12 mapped contacts read more than their
@@ -190,8 +192,8 @@ pub struct NeckRingConfig {
     /// above the horizon. Level, the far background filled the frames and the odometry lost
     /// the map on the default world's rock 3 (frames dropped for 2.6 s, then diverged).
     pub camera_pitch_down_deg: f64,
-    /// Clearance kept from terrain and obstacles by this ring and the way to it (m). Default
-    /// 1.0: above the safety monitor's radius (0.8 m) so the monitor does not climb away from
+    /// Clearance kept from the terrain by this ring and the way to it (m; rocks and pedestals
+    /// keep the mission's clearance, `clearance.min_clearance_m`). Default 1.0: above the safety monitor's radius (0.8 m) so the monitor does not climb away from
     /// a ring flown as planned; the ground is sensed, not taken from the estimate. At 0.9 the
     /// default world's rock 3 ring was flown 0.73–0.84 m from the ground and the monitor
     /// climbed 30 times.
@@ -1162,7 +1164,8 @@ fn plan_clear_from_some_start(
 /// an arc), then a move straight out from the axis by `cfg.standoff_m` (where that is clear)
 /// and a climb straight up to where `ccfg` (the mission's clearance) holds over the terrain and
 /// every obstacle, so the flight goes on from there as from any ring. Its path keeps
-/// `cfg.neck_ring.min_clearance_m` from `env`.
+/// `cfg.neck_ring.min_clearance_m` from `env`'s terrain and `ccfg`'s from its obstacles
+/// ([`neck_ring_environment`]).
 ///
 /// # Errors
 /// [`PlanError::InvalidParameter`] when the ring is disabled or `neck_z_m` is not finite or
@@ -1215,31 +1218,51 @@ pub fn plan_neck_ring_clear(
         min_clearance_m: neck.min_clearance_m,
         ..*ccfg
     };
+    let low_env = neck_ring_environment(env, neck, ccfg);
     let mut plan = plan_clear_from_some_start(
         cylinder,
         start,
         camera,
         &ring_cfg,
-        env,
+        &low_env,
         &low,
         RingSet::BaseOnly,
     )?;
-    append_neck_ring_exit(&mut plan, cylinder, cfg.standoff_m, env, &low, ccfg)?;
+    append_neck_ring_exit(
+        &mut plan,
+        cylinder,
+        cfg.standoff_m,
+        (env, &low_env),
+        &low,
+        ccfg,
+    )?;
     Ok(plan)
 }
 
+/// What the neck ring is checked against at its own clearance (`neck.min_clearance_m`): `env`
+/// with its obstacles' clearance cut by what the neck ring lowers, so that it comes closer to
+/// the terrain only, whose height the safety monitor measures, and keeps the mission's
+/// clearance (`ccfg`) from every rock and pedestal (see [`Environment::with_obstacle_margin`]).
+pub fn neck_ring_environment(
+    env: &Environment,
+    neck: &NeckRingConfig,
+    ccfg: &ClearanceConfig,
+) -> Environment {
+    env.with_obstacle_margin(ccfg.min_clearance_m - neck.min_clearance_m)
+}
+
 /// Appends the way out of a neck ring to `plan`: straight out from the axis by `standoff_m`,
-/// level (where that keeps `low`'s clearance), then straight up until `ccfg`'s clearance holds
-/// over the terrain and every obstacle (plus the terrain-following margin).
+/// level (where that keeps `low`'s clearance in `low_env`), then straight up until `ccfg`'s
+/// clearance holds over `env`'s terrain and every obstacle (plus the terrain-following margin).
 ///
 /// # Errors
 /// [`PlanError::Clearance`] when no climb within `ccfg.max_raise_m` clears, or the climb
-/// itself comes within `low`'s clearance.
+/// itself comes within `low`'s clearance in `low_env`.
 fn append_neck_ring_exit(
     plan: &mut RingPlan,
     cylinder: &VerticalCylinder,
     standoff_m: f64,
-    env: &Environment,
+    (env, low_env): (&Environment, &Environment),
     low: &ClearanceConfig,
     ccfg: &ClearanceConfig,
 ) -> Result<(), PlanError> {
@@ -1259,7 +1282,7 @@ fn append_neck_ring_exit(
         ring_end.position_m.z,
     );
     let backed = Waypoint::new(lifted_over_terrain(&backed, env, low), ring_end.yaw_rad);
-    let last = if env
+    let last = if low_env
         .check_path(&Path::new(vec![ring_end, backed]), low)
         .is_clear()
     {
@@ -1287,7 +1310,8 @@ fn append_neck_ring_exit(
     if above.z > last.position_m.z + 1e-6 {
         let climb = Waypoint::new(above, last.yaw_rad);
         plan.path.waypoints.push(climb);
-        env.check_path(&Path::new(vec![last, climb]), low)
+        low_env
+            .check_path(&Path::new(vec![last, climb]), low)
             .ensure_clear("the climb from the neck ring")?;
     }
     Ok(())

@@ -781,6 +781,53 @@ fn neck_ring_flies_at_the_neck_and_climbs_back_to_the_clearance() {
     assert!(!env.check_path(&plan.path, &cfg.clearance).is_clear());
 }
 
+/// A boulder beside the neck ring: over the ground the ring keeps its own 1.0 m, from the
+/// boulder the mission's 1.5 m (nothing measures the estimate's horizontal walk; library-b seed
+/// 62's neck ring, kept 1.0 m from the block it circled, came 0.29 m from it in truth).
+#[test]
+fn neck_ring_keeps_the_missions_clearance_from_rocks_beside_it() {
+    let (ground, cyl, start) = rock_on_flat_ground();
+    let mut cfg = PlanningConfig::default();
+    cfg.mapping.neck_ring.enabled = true;
+    // A boulder whose side is `gap_m` from the ring's circle (radius 2.3 m).
+    let with_boulder = |gap_m: f64| {
+        let boulder = Obstacle::Cylinder {
+            center_x_m: 2.3 + gap_m + 0.5,
+            center_y_m: 0.0,
+            radius_m: 0.5,
+            z_bottom_m: 0.0,
+            z_top_m: 1.5,
+        };
+        Environment::new(ground.terrain().cloned(), &[boulder]).unwrap()
+    };
+    // 1.6 m away: flown as on open ground, 1.13 m over it.
+    let env = with_boulder(1.6);
+    let plan = cfg.neck_ring_around(&cyl, &start, 1.1, &env).unwrap();
+    assert!(
+        (plan.rings[0].radius_m - 2.3).abs() < 1e-9,
+        "{:?}",
+        plan.repairs
+    );
+    let from_ground = ground.check_path(&plan.path, &cfg.clearance);
+    assert!(from_ground.min_clearance_m.unwrap() < 1.2);
+    common::clear_trajectory_from_rest(
+        &plan.path,
+        &cfg.neck_ring_environment(&env),
+        &cfg.for_neck_ring(),
+    );
+    // 1.2 m away: inside the mission's clearance, though outside the ring's own. The ring's
+    // repairs cannot pass it at 1.5 m (it is level and 2.3 m out), so no ring, named.
+    let env = with_boulder(1.2);
+    let err = cfg.neck_ring_around(&cyl, &start, 1.1, &env).unwrap_err();
+    assert!(err.to_string().contains("obstacle 0"), "{err}");
+    // With the mission's clearance lowered to the ring's, the same ring is flown there: the
+    // margin, not the ring's clearance, refused it.
+    let mut same = cfg;
+    same.clearance.min_clearance_m = cfg.mapping.neck_ring.min_clearance_m;
+    let plain = same.neck_ring_around(&cyl, &start, 1.1, &env).unwrap();
+    assert!((plain.rings[0].radius_m - 2.3).abs() < 1e-9);
+}
+
 #[test]
 fn a_rock_on_the_ground_gets_no_neck_ring_and_bad_necks_are_refused() {
     let (env, cyl, start) = rock_on_flat_ground();

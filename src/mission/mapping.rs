@@ -84,6 +84,39 @@ pub struct MappingSession {
     /// `frames_mapped` when the map's patched share was last read, and that share (`None`
     /// where the map could not be cut), for [`Self::ends_mapping`].
     patched_check: Option<(usize, Option<f64>)>,
+    /// The guarded stretch of the flight, once [`Self::guard_from_here`] started it.
+    guard: Option<GuardedStretch>,
+}
+
+/// Keyframes (and frames kept between them) from this long before the first frame a guarded
+/// stretch lost are taken out of the map with it, seconds. Why: the rotation gate catches a
+/// tracked jump, not a slide, and a view leaving what the model shares slides the odometry
+/// over the frames before it fails (library-b, seed 62, session 54: the double rock's neck ring
+/// lost the map, and the re-acquired guesses 0.40–0.57 m off the estimate took its F@2cm to
+/// 0.296). One second is 20 frames at the mission's map rate.
+pub const GUARD_ROLLBACK_S: f64 = 1.0;
+
+/// A stretch of a mapping flight whose frames may share too little with the model for the
+/// odometry (the neck ring's low views of a map built from above): its frames are mapped while
+/// each is tracked, and from the first that is not, none, so that it can add views and never
+/// break the map.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct GuardedStretch {
+    /// Frames mapped on it (before it stopped).
+    pub frames_mapped: usize,
+    /// Why and when it stopped mapping; `None` while every frame was tracked.
+    pub stop: Option<GuardStop>,
+}
+
+/// Where a guarded stretch stopped mapping.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GuardStop {
+    /// The first frame not tracked (its timestamp, simulated seconds).
+    pub at_s: f64,
+    /// Why it was not tracked.
+    pub reason: String,
+    /// Keyframes taken out of the map with it ([`GUARD_ROLLBACK_S`]).
+    pub keyframes_removed: usize,
 }
 
 /// Frames tried to see the target in before its map starts where the localization put it
@@ -410,6 +443,7 @@ impl MappingSession {
             frames_dropped: 0,
             reacquisitions: 0,
             patched_check: None,
+            guard: None,
         })
     }
 
@@ -534,9 +568,46 @@ impl MappingSession {
         self.patched_check.and_then(|(_, share)| share)
     }
 
+    /// From the next frame on, maps only while every frame is tracked (see [`GuardedStretch`]):
+    /// the first frame the odometry fails, distrusts or has to re-acquire stops the mapping
+    /// for good and takes the keyframes of the [`GUARD_ROLLBACK_S`] before it out of the map.
+    pub fn guard_from_here(&mut self) {
+        self.guard = Some(GuardedStretch::default());
+    }
+
+    /// The guarded stretch, once [`Self::guard_from_here`] started one.
+    pub fn guarded_stretch(&self) -> Option<&GuardedStretch> {
+        self.guard.as_ref()
+    }
+
+    /// Stops the guarded stretch at the frame at `at_s`: takes out the keyframes and the frames
+    /// between them from [`GUARD_ROLLBACK_S`] before it.
+    fn stop_guarded_stretch(&mut self, at_s: f64, reason: String) {
+        let cutoff_s = at_s - GUARD_ROLLBACK_S;
+        let before = self.stored.len();
+        // Keyframes before the guarded stretch stay: it started after them.
+        self.stored.retain(|f| f.frame.timestamp_s < cutoff_s);
+        self.between.retain(|f| f.frame.timestamp_s < cutoff_s);
+        let keyframes_removed = before - self.stored.len();
+        tracing::warn!(
+            "target {}: the guarded stretch stops mapping at {at_s:.2} s ({reason}); {} \
+             keyframes of the {GUARD_ROLLBACK_S} s before it taken out",
+            self.target_id,
+            keyframes_removed
+        );
+        if let Some(guard) = self.guard.as_mut() {
+            guard.stop = Some(GuardStop {
+                at_s,
+                reason,
+                keyframes_removed,
+            });
+        }
+    }
+
     /// Maps one frame when its view meets the region of interest: tracks it against the model,
     /// fuses it, updates the coverage and keeps it if it is a keyframe. The true pose, where
-    /// known (simulation), is kept for the evaluation only.
+    /// known (simulation), is kept for the evaluation only. On a guarded stretch that stopped,
+    /// frames are not mapped.
     ///
     /// # Errors
     /// A frame that does not match the camera or a non-finite estimate.
@@ -547,11 +618,34 @@ impl MappingSession {
         world_from_camera_truth: Option<&Isometry3<f64>>,
     ) -> MissionResult<()> {
         self.navigation_error_m = None;
-        if !self.would_map(world_from_camera_estimate) {
+        if self.guard.as_ref().is_some_and(|g| g.stop.is_some())
+            || !self.would_map(world_from_camera_estimate)
+        {
             return Ok(());
         }
         frame.instance_mask = None;
         let tracked = self.tracker.process(&frame, world_from_camera_estimate)?;
+        if self.guard.is_some()
+            && (tracked.dropped || tracked.fell_back || tracked.reacquisition.is_some())
+        {
+            let reason = match (tracked.distrust_reason(), &tracked.reacquisition) {
+                (Some(why), _) => why,
+                (None, Some(r)) => format!(
+                    "re-acquired after {:.1} s out of view, {:.2} m from the estimate",
+                    r.gap_s,
+                    r.offset_m.norm()
+                ),
+                (None, None) => "placed by the estimate".into(),
+            };
+            self.stop_guarded_stretch(frame.timestamp_s, reason);
+            if tracked.dropped {
+                self.frames_dropped += 1;
+            }
+            return Ok(());
+        }
+        if let Some(guard) = self.guard.as_mut() {
+            guard.frames_mapped += 1;
+        }
         if let Some(r) = &tracked.reacquisition {
             self.reacquisitions += 1;
             tracing::info!(
@@ -1231,6 +1325,71 @@ mod tests {
     /// The cells of a loose coverage end mapping after a few frames; the rock's patched share
     /// keeps it flying while the map holds one side of the rock only, and lets it end once the
     /// ring has gone round.
+    #[test]
+    fn a_guarded_stretch_stops_at_the_first_frame_lost_and_takes_its_last_second_out() {
+        let world = World::builtin_default().unwrap();
+        let rock = world.targets().next().unwrap();
+        let config = MissionConfig::default();
+        let camera = PinholeCamera::from_hfov(160, 120, 87.0).unwrap();
+        let cylinder = rock_cylinder(&world, rock, &Vector3::zeros(), &config.cylinder).unwrap();
+        let mut session = MappingSession::new(1, &cylinder, &camera, &config).unwrap();
+        let renderer = scarp_datasets::render::Renderer::new(&world);
+        let centre = rock.centroid;
+        // Step `step` of a circle, 3° and 0.1 s apart; the estimate yawed by `yaw_error_deg`.
+        let view = |session: &mut MappingSession, step: u32, yaw_error_deg: f64| {
+            let azimuth = (f64::from(step) * 3.0).to_radians();
+            let out_m = cylinder.radius_m + 1.5;
+            let eye = centre + Vector3::new(out_m * azimuth.cos(), out_m * azimuth.sin(), 1.0);
+            let pose = scarp_slam::geometry::look_at(&eye, &centre, &Vector3::z()).unwrap();
+            let rendered = renderer.render(&camera, &pose).unwrap();
+            let t_s = f64::from(step) * 0.1;
+            let frame = RgbdFrame::new(t_s, rendered.rgb, rendered.depth_m, None).unwrap();
+            let yaw =
+                nalgebra::UnitQuaternion::from_euler_angles(0.0, 0.0, yaw_error_deg.to_radians());
+            let estimate = Isometry3::from_parts(pose.translation, yaw * pose.rotation);
+            session.process(frame, &estimate, Some(&pose)).unwrap();
+        };
+        for step in 0..30 {
+            view(&mut session, step, 0.0);
+        }
+        let before_guard = session.stored.len();
+        session.guard_from_here();
+        for step in 30..45 {
+            view(&mut session, step, 0.0);
+        }
+        let guard = session.guarded_stretch().unwrap().clone();
+        assert_eq!((guard.frames_mapped, guard.stop), (15, None));
+        let in_last_second = session
+            .stored
+            .iter()
+            .filter(|f| f.frame.timestamp_s >= 3.5 - 1e-9)
+            .count();
+        assert!(
+            in_last_second > 0 && session.stored.len() > before_guard,
+            "the guarded frames made keyframes, some in its last second: {} of {}",
+            in_last_second,
+            session.stored.len()
+        );
+        // The state estimate turns 10° in 0.1 s where the views do not: the frame is distrusted.
+        view(&mut session, 45, 10.0);
+        let stop = session.guarded_stretch().unwrap().stop.clone().unwrap();
+        assert_eq!(stop.at_s, 4.5);
+        assert_eq!(stop.keyframes_removed, in_last_second, "{}", stop.reason);
+        assert!(!stop.reason.is_empty());
+        assert!(session.stored.iter().all(|f| f.frame.timestamp_s < 3.5));
+        assert!(session.between.iter().all(|f| f.frame.timestamp_s < 3.5));
+        let kept = session.stored.len();
+        for step in 46..60 {
+            view(&mut session, step, 0.0);
+        }
+        assert_eq!(
+            session.stored.len(),
+            kept,
+            "nothing is mapped after the stop"
+        );
+        assert_eq!(session.guarded_stretch().unwrap().frames_mapped, 15);
+    }
+
     #[test]
     fn mapping_flies_on_while_the_rock_in_the_map_is_mostly_unseen() {
         let world = World::builtin_default().unwrap();

@@ -27,6 +27,15 @@ pub struct NeckRingReport {
     pub repairs: Vec<scarp_planning::prelude::Repair>,
     /// Why it was not flown.
     pub not_flown: Option<String>,
+    /// Frames mapped on it: the ring is mapped only while the odometry tracks every frame
+    /// ([`crate::mission::mapping::GuardedStretch`]).
+    #[serde(default)]
+    pub frames_mapped: usize,
+    /// Why its mapping stopped before its end (the first frame the odometry did not track, its
+    /// simulated time and reason), and how many keyframes before it were taken out of the map;
+    /// `None` where it was mapped to its end or not flown.
+    #[serde(default)]
+    pub mapping_stopped: Option<String>,
 }
 
 /// One target in `mission.json`. Ground-truth fields are `null` without ground truth.

@@ -933,7 +933,7 @@ impl<'a> Mission<'a> {
                 .vehicle_mut()
                 .follow(
                     &plan.path.waypoints[1..],
-                    &env,
+                    &config.planning.neck_ring_environment(&env),
                     &config.planning.for_neck_ring(),
                 )
                 .map_err(|e| format!("{e:#}"))?;
@@ -959,10 +959,13 @@ impl<'a> Mission<'a> {
                     ring_z_m: Some(ring.z_m),
                     span_deg: ring.span_rad.to_degrees(),
                     repairs: plan.repairs.clone(),
-                    not_flown: None,
+                    ..NeckRingReport::default()
                 });
                 self.ring_plan = Some(plan);
                 self.neck_ring = NeckRingStage::Flying;
+                if let Some(session) = self.mapping.as_mut() {
+                    session.guard_from_here();
+                }
                 true
             }
             Err(reason) => {
@@ -986,6 +989,17 @@ impl<'a> Mission<'a> {
             return Ok(());
         };
         target.report.ring_drift_m = self.ring_drift.largest_m();
+        if let (Some(ring), Some(guard)) =
+            (target.report.neck_ring.as_mut(), session.guarded_stretch())
+        {
+            ring.frames_mapped = guard.frames_mapped;
+            ring.mapping_stopped = guard.stop.as_ref().map(|stop| {
+                format!(
+                    "at {:.2} s: {}; {} keyframes before it taken out",
+                    stop.at_s, stop.reason, stop.keyframes_removed
+                )
+            });
+        }
         target.report.map_frame_refusals = self.map_frame.take_rejected();
         let points = self
             .perception
