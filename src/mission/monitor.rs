@@ -12,7 +12,10 @@
 //!    The correction is rate-limited, so a first reading does not jerk the vehicle, and fades
 //!    when the ground is out of range;
 //! 2. climbs away when any sensed surface comes nearer than the safety radius (a reflex on the
-//!    controller only, not on the estimate), and counts each such intervention.
+//!    controller only, not on the estimate), and counts each such intervention; where the
+//!    nearest surface is the depth camera's, it also backs away from it horizontally, since a
+//!    climb does not take the vehicle off a rock's side (library-b seed 62, session 55: a neck
+//!    ring's way out climbed along the block it had circled, from 0.72 m to 0.28 m).
 //!
 //! The clearance budget, in DESIGN terms: the airframe's radius (the collision radius, 0.3 m)
 //! plus a 0.5 m margin gives the safety radius (0.8 m). Heights are sensed near the ground, so
@@ -21,6 +24,7 @@
 
 use std::collections::VecDeque;
 
+use nalgebra::{Isometry3, Point3, Vector2};
 use scarp_slam::PinholeCamera;
 use scarp_slam::image::DepthImage;
 use scarp_slam::stats::median;
@@ -117,6 +121,9 @@ pub struct Senses {
     pub range_expected_m: Option<f64>,
     /// Distance from the camera to the nearest measured depth point, metres.
     pub nearest_depth_m: Option<f64>,
+    /// The horizontal direction from the camera towards that point, world ENU (a unit vector;
+    /// `None` where it lies nearly straight above or below, or is unknown).
+    pub nearest_depth_toward_xy: Option<Vector2<f64>>,
 }
 
 /// What the monitor decided at one step.
@@ -125,6 +132,9 @@ pub struct MonitorStep {
     /// Add this to the vertical error of the position the controller flies on, metres: the
     /// sensed vertical error removed, minus any climb.
     pub vertical_correction_m: f64,
+    /// Add this to the horizontal error of the position the controller flies on, world ENU
+    /// metres: the back-away reflex ([`SafetyMonitor::retreat_xy_m`]).
+    pub retreat_xy_m: Vector2<f64>,
     /// The nearest sensed surface, metres.
     pub sensed_clearance_m: Option<f64>,
     /// An intervention began at this step (a surface came inside the safety radius).
@@ -142,6 +152,11 @@ pub struct SafetyMonitor {
     climb_m: f64,
     /// The climb when the intrusion in progress began, metres.
     climb_at_onset_m: f64,
+    /// The back-away commanded by interventions of the depth camera, world ENU metres, pointing
+    /// towards the surface backed away from.
+    retreat_xy_m: Vector2<f64>,
+    /// The back-away when the intrusion in progress began.
+    retreat_at_onset_xy_m: Vector2<f64>,
     previous_time_s: Option<f64>,
     last_reading_s: Option<f64>,
     intervening: bool,
@@ -158,6 +173,8 @@ impl SafetyMonitor {
             correction_m: 0.0,
             climb_m: 0.0,
             climb_at_onset_m: 0.0,
+            retreat_xy_m: Vector2::zeros(),
+            retreat_at_onset_xy_m: Vector2::zeros(),
             previous_time_s: None,
             last_reading_s: None,
             intervening: false,
@@ -182,6 +199,18 @@ impl SafetyMonitor {
             self.climb_m
         } else {
             0.0
+        }
+    }
+
+    /// The back-away the reflex commands, world ENU metres, pointing towards the surface it
+    /// backs away from: add it to the horizontal position the controller flies on (the
+    /// controller then believes itself that much nearer the surface, and moves off). Zero when
+    /// the monitor is off.
+    pub fn retreat_xy_m(&self) -> Vector2<f64> {
+        if self.config.monitor {
+            self.retreat_xy_m
+        } else {
+            Vector2::zeros()
         }
     }
 
@@ -225,6 +254,7 @@ impl SafetyMonitor {
         let intervention_started = inside && !self.intervening && c.monitor;
         if intervention_started {
             self.climb_at_onset_m = self.climb_m;
+            self.retreat_at_onset_xy_m = self.retreat_xy_m;
         }
         match sensed {
             // Climb by the whole intrusion at once (the reflex, not the smoothing), and never
@@ -234,8 +264,21 @@ impl SafetyMonitor {
                 self.climb_m = self
                     .climb_m
                     .max(self.climb_at_onset_m + c.safety_radius_m - s);
+                // The same, away from the camera's nearest surface, where that is the nearest.
+                if let (Some(depth), Some(toward)) =
+                    (senses.nearest_depth_m, senses.nearest_depth_toward_xy)
+                    && depth <= s
+                {
+                    let retreat = self.retreat_at_onset_xy_m + toward * (c.safety_radius_m - s);
+                    if retreat.norm() > self.retreat_xy_m.norm() {
+                        self.retreat_xy_m = retreat;
+                    }
+                }
             }
-            _ => self.climb_m *= fade,
+            _ => {
+                self.climb_m *= fade;
+                self.retreat_xy_m *= fade;
+            }
         }
         self.intervening = inside;
         if intervention_started {
@@ -243,6 +286,7 @@ impl SafetyMonitor {
         }
         MonitorStep {
             vertical_correction_m: self.vertical_correction_m(),
+            retreat_xy_m: self.retreat_xy_m(),
             sensed_clearance_m: sensed,
             intervention_started,
         }
@@ -253,21 +297,43 @@ impl SafetyMonitor {
 /// (every second pixel of every second row: a 2-pixel gap cannot hide an obstacle that could
 /// touch the airframe). `None` for an image with no measurement.
 pub fn nearest_depth_m(depth_m: &DepthImage, camera: &PinholeCamera) -> Option<f64> {
+    nearest_depth_point(depth_m, camera).map(|p| p.coords.norm())
+}
+
+/// The nearest measured point of a depth image (as [`nearest_depth_m`]), in the camera frame
+/// (x right, y down, z forward, metres). Of points at the same distance, the first in
+/// row-major order.
+pub fn nearest_depth_point(depth_m: &DepthImage, camera: &PinholeCamera) -> Option<Point3<f64>> {
     let (w, h) = (depth_m.width() as usize, depth_m.height() as usize);
     let values = depth_m.as_slice();
-    let mut nearest: Option<f64> = None;
+    let mut nearest: Option<(f64, Point3<f64>)> = None;
     for v in (0..h).step_by(2) {
         let y = (v as f64 - camera.cy) / camera.fy;
         for u in (0..w).step_by(2) {
             let z = f64::from(values[v * w + u]);
-            if z > 0.0 && z.is_finite() && nearest.is_none_or(|n| z < n) {
+            // A ray is at least as long as its depth: farther depths cannot win.
+            if z > 0.0 && z.is_finite() && nearest.is_none_or(|(n, _)| z < n) {
                 let x = (u as f64 - camera.cx) / camera.fx;
                 let distance = z * (1.0 + x * x + y * y).sqrt();
-                nearest = Some(nearest.map_or(distance, |n| n.min(distance)));
+                if nearest.is_none_or(|(n, _)| distance < n) {
+                    nearest = Some((distance, Point3::new(x * z, y * z, z)));
+                }
             }
         }
     }
-    nearest
+    nearest.map(|(_, p)| p)
+}
+
+/// The horizontal direction towards `world_from_camera · point_camera` from the camera, world
+/// ENU (unit); `None` where the point lies within about 6° of straight above or below the
+/// camera (a climb, not a back-away, is the answer there).
+pub fn horizontal_direction_towards(
+    world_from_camera: &Isometry3<f64>,
+    point_camera: &Point3<f64>,
+) -> Option<Vector2<f64>> {
+    let ray = world_from_camera.rotation * point_camera.coords;
+    let horizontal = ray.xy();
+    (horizontal.norm() > 0.1 * ray.norm()).then(|| horizontal.normalize())
 }
 
 #[cfg(test)]
@@ -278,7 +344,7 @@ mod tests {
         Senses {
             range_measured_m: Some(measured),
             range_expected_m: Some(expected),
-            nearest_depth_m: None,
+            ..Senses::default()
         }
     }
 
@@ -357,6 +423,70 @@ mod tests {
         assert!(monitor.vertical_correction_m().abs() < 1e-3);
     }
 
+    /// A rock's side 0.5 m off in the camera's view, to the east: the reflex climbs and backs
+    /// away west by the intrusion; the rangefinder's surface below only climbs.
+    #[test]
+    fn a_surface_seen_beside_the_vehicle_is_backed_away_from() {
+        let mut monitor = SafetyMonitor::new(&SafetyConfig::default());
+        let east = Vector2::new(1.0, 0.0);
+        let beside = Senses {
+            nearest_depth_m: Some(0.5),
+            nearest_depth_toward_xy: Some(east),
+            ..Senses::default()
+        };
+        let step = monitor.update(0.0, &beside);
+        assert!(step.intervention_started);
+        assert!((step.retreat_xy_m - east * 0.3).norm() < 1e-12, "{step:?}");
+        assert!((step.vertical_correction_m + 0.3).abs() < 1e-12);
+        // Deeper: more; shallower while it lasts: kept.
+        let deeper = Senses {
+            nearest_depth_m: Some(0.4),
+            ..beside
+        };
+        assert!((monitor.update(0.05, &deeper).retreat_xy_m - east * 0.4).norm() < 1e-12);
+        assert!((monitor.update(0.1, &beside).retreat_xy_m - east * 0.4).norm() < 1e-12);
+        // Clear for long: it fades.
+        for k in 0..4000 {
+            monitor.update(0.2 + 0.05 * f64::from(k), &Senses::default());
+        }
+        assert!(monitor.retreat_xy_m().norm() < 1e-3);
+
+        let mut monitor = SafetyMonitor::new(&SafetyConfig::default());
+        let below = Senses {
+            range_measured_m: Some(0.5),
+            nearest_depth_m: Some(2.0),
+            nearest_depth_toward_xy: Some(east),
+            ..Senses::default()
+        };
+        let step = monitor.update(0.0, &below);
+        assert!(step.intervention_started);
+        assert_eq!(step.retreat_xy_m, Vector2::zeros(), "the nearest is below");
+    }
+
+    #[test]
+    fn the_direction_towards_a_point_is_horizontal_and_none_straight_down() {
+        // A camera looking north, level: x right (east), y down, z forward (north).
+        let rotation = nalgebra::Rotation3::from_matrix_unchecked(nalgebra::Matrix3::new(
+            1.0, 0.0, 0.0, //
+            0.0, 0.0, 1.0, //
+            0.0, -1.0, 0.0,
+        ));
+        let world_from_camera = Isometry3::from_parts(
+            nalgebra::Translation3::new(5.0, 5.0, 2.0),
+            nalgebra::UnitQuaternion::from_rotation_matrix(&rotation),
+        );
+        let ahead =
+            horizontal_direction_towards(&world_from_camera, &Point3::new(0.0, 0.5, 1.0)).unwrap();
+        assert!((ahead - Vector2::new(0.0, 1.0)).norm() < 1e-12, "{ahead}");
+        let right =
+            horizontal_direction_towards(&world_from_camera, &Point3::new(2.0, 0.0, 0.0)).unwrap();
+        assert!((right - Vector2::new(1.0, 0.0)).norm() < 1e-12, "{right}");
+        assert_eq!(
+            horizontal_direction_towards(&world_from_camera, &Point3::new(0.0, 1.0, 0.05)),
+            None
+        );
+    }
+
     #[test]
     fn without_readings_the_correction_fades() {
         let mut monitor = SafetyMonitor::new(&SafetyConfig::default());
@@ -403,6 +533,12 @@ mod tests {
         *depth.get_mut(100, 40).unwrap() = 2.0;
         let nearest = nearest_depth_m(&depth, &camera).unwrap();
         assert!((nearest - 2.0 * 1.25f64.sqrt()).abs() < 1e-9, "{nearest}");
+        // The point itself: half a depth to the right, level with the axis.
+        let point = nearest_depth_point(&depth, &camera).unwrap();
+        assert!(
+            (point - Point3::new(1.0, 0.0, 2.0)).norm() < 1e-6,
+            "{point}"
+        );
     }
 
     #[test]

@@ -25,7 +25,7 @@ use super::config::MissionConfig;
 use super::evaluation::EstimatorErrorByTarget;
 use super::mapping::{MappingSession, finish_target, mapped_status};
 use super::mode::{FlightLogEntry, Mode};
-use super::monitor::{SafetyMonitor, Senses, nearest_depth_m};
+use super::monitor::{SafetyMonitor, Senses, horizontal_direction_towards, nearest_depth_point};
 use super::motion::MotionSystem;
 use super::mount::CameraMount;
 use super::navigation::{MapFrameOffset, RingDrift};
@@ -338,8 +338,11 @@ impl<'a> Mission<'a> {
             && self.sensors.vehicle().current_waypoint().position_m.z
                 >= self.search.altitude_m - CLEAR_OF_TARGET_BELOW_SEARCH_M;
         self.map_frame.advance(t, clear);
-        // The climb reflex makes the controller believe it is lower than it is.
-        let flown = self.navigation_error_m() - Vector3::z() * self.monitor.climb_m();
+        // The climb reflex makes the controller believe it is lower than it is, the back-away
+        // nearer the surface.
+        let retreat = self.monitor.retreat_xy_m();
+        let flown = self.navigation_error_m() - Vector3::z() * self.monitor.climb_m()
+            + Vector3::new(retreat.x, retreat.y, 0.0);
         self.sensors.vehicle_mut().advance_to(t, &flown)?;
         let t = self.sensors.vehicle().time_s();
         let position = self.sensors.vehicle().world_from_body().translation.vector;
@@ -396,7 +399,7 @@ impl<'a> Mission<'a> {
                 self.inputs.world,
             )?;
         }
-        self.watch_clearance(t, &position, &frame);
+        self.watch_clearance(t, &position, &frame, &estimate);
 
         match self.mode {
             Mode::Search => {
@@ -500,7 +503,13 @@ impl<'a> Mission<'a> {
     /// The safety layer's step: reads the rangefinder at the true position (the map predicts
     /// its reading at the state estimator's position, truth + its drift) and the frame's
     /// nearest depth, updates the monitor, and records an intervention.
-    fn watch_clearance(&mut self, t: f64, position: &Vector3<f64>, frame: &RgbdFrame) {
+    fn watch_clearance(
+        &mut self,
+        t: f64,
+        position: &Vector3<f64>,
+        frame: &RgbdFrame,
+        world_from_camera_estimate: &Isometry3<f64>,
+    ) {
         let config = &self.inputs.config.safety;
         let max_range = config.rangefinder_max_range_m;
         let mut rng = Xoshiro256PlusPlus::seed_from_u64(derive_seed(
@@ -519,7 +528,16 @@ impl<'a> Mission<'a> {
             range_expected_m: self
                 .env
                 .range_below(&(truth + self.sensors.position_drift_m()), max_range),
-            nearest_depth_m: nearest_depth_m(&frame.depth_m, self.sensors.camera()),
+            ..Senses::default()
+        };
+        // The direction from the estimate's attitude (the IMU's, good to a degree), which is
+        // all a back-away needs.
+        let nearest = nearest_depth_point(&frame.depth_m, self.sensors.camera());
+        let senses = Senses {
+            nearest_depth_m: nearest.map(|p| p.coords.norm()),
+            nearest_depth_toward_xy: nearest
+                .and_then(|p| horizontal_direction_towards(world_from_camera_estimate, &p)),
+            ..senses
         };
         let step = self.monitor.update(t, &senses);
         if step.intervention_started
