@@ -183,7 +183,10 @@ pub struct NeckRingConfig {
     /// Fly the neck ring. Default false: session 54 flew it on the default world (seed 0: rock
     /// 3 +0.05°, rock 1 −0.05°, rock 2 +2.20° against −0.06°, +0.19°, −0.57° without it; all
     /// inside their intervals) and in part of a campaign, not enough to turn it on; it also
-    /// adds about 45 s of flight and 900 mapped frames per target.
+    /// adds about 45 s of flight and 900 mapped frames per target. Session 55 guarded its
+    /// mapping and kept it 1.5 m from rocks: over seeds 60–62 of three worlds no map broke, but
+    /// two runs came 0.41–0.42 m from a rock (under the 0.5 m the safety issue asks) and one
+    /// map scored F@2cm 0.846, so it stays off.
     pub enabled: bool,
     /// Height of the ring above the neck the map shows (m). Default 0.03.
     pub height_above_neck_m: f64,
