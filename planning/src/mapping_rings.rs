@@ -196,8 +196,9 @@ pub struct NeckRingConfig {
     /// the map on the default world's rock 3 (frames dropped for 2.6 s, then diverged).
     pub camera_pitch_down_deg: f64,
     /// Clearance kept from the terrain by this ring and the way to it (m; rocks and pedestals
-    /// keep the mission's clearance, `clearance.min_clearance_m`). Default 1.0: above the safety monitor's radius (0.8 m) so the monitor does not climb away from
-    /// a ring flown as planned; the ground is sensed, not taken from the estimate. At 0.9 the
+    /// keep the mission's clearance, `clearance.min_clearance_m`). Default 1.0: above the
+    /// safety monitor's radius (0.8 m) so the monitor does not climb away from a ring flown as
+    /// planned; the ground is sensed, not taken from the estimate. At 0.9 the
     /// default world's rock 3 ring was flown 0.73–0.84 m from the ground and the monitor
     /// climbed 30 times.
     pub min_clearance_m: f64,

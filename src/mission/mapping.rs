@@ -1322,9 +1322,6 @@ mod tests {
         eprintln!("worst centre error {worst_m:.2} m");
     }
 
-    /// The cells of a loose coverage end mapping after a few frames; the rock's patched share
-    /// keeps it flying while the map holds one side of the rock only, and lets it end once the
-    /// ring has gone round.
     #[test]
     fn a_guarded_stretch_stops_at_the_first_frame_lost_and_takes_its_last_second_out() {
         let world = World::builtin_default().unwrap();
@@ -1390,6 +1387,9 @@ mod tests {
         assert_eq!(session.guarded_stretch().unwrap().frames_mapped, 15);
     }
 
+    /// The cells of a loose coverage end mapping after a few frames; the rock's patched share
+    /// keeps it flying while the map holds one side of the rock only, and lets it end once the
+    /// ring has gone round.
     #[test]
     fn mapping_flies_on_while_the_rock_in_the_map_is_mostly_unseen() {
         let world = World::builtin_default().unwrap();

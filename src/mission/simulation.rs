@@ -519,6 +519,9 @@ impl<'a> Mission<'a> {
         let dropped = rng.random::<f64>() < config.rangefinder_dropout_probability;
         let noise_m = config.rangefinder_sigma_m * rng.sample::<f64, _>(StandardNormal);
         let truth = Point3::from(*position);
+        // The direction from the estimate's attitude (the IMU's, good to a degree), which is
+        // all a back-away needs.
+        let nearest = nearest_depth_point(&frame.depth_m, self.sensors.camera());
         let senses = Senses {
             range_measured_m: self
                 .env
@@ -528,16 +531,9 @@ impl<'a> Mission<'a> {
             range_expected_m: self
                 .env
                 .range_below(&(truth + self.sensors.position_drift_m()), max_range),
-            ..Senses::default()
-        };
-        // The direction from the estimate's attitude (the IMU's, good to a degree), which is
-        // all a back-away needs.
-        let nearest = nearest_depth_point(&frame.depth_m, self.sensors.camera());
-        let senses = Senses {
             nearest_depth_m: nearest.map(|p| p.coords.norm()),
             nearest_depth_toward_xy: nearest
                 .and_then(|p| horizontal_direction_towards(world_from_camera_estimate, &p)),
-            ..senses
         };
         let step = self.monitor.update(t, &senses);
         if step.intervention_started
