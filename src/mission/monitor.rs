@@ -55,6 +55,14 @@ pub struct SafetyConfig {
     /// Without readings, the correction and any climb fade with this time constant, seconds.
     /// Default 20 (the GPS walk's correlation time is 30 s).
     pub fade_time_s: f64,
+    /// While a surface stays inside the safety radius, the reflex grows by this much per
+    /// second per metre of intrusion, on top of the intrusion itself, 1/s. Default 2. A reflex
+    /// of the intrusion alone lets a steady walk of the estimate towards the surface take half
+    /// of every metre it walks (library-b seed 62: the estimate walked 1.0 m in 11 s and the
+    /// vehicle came 0.42 m from the block); with this integral part, a steady walk only holds
+    /// an intrusion of its speed over this gain (0.05 m at 0.1 m/s), plus what the vehicle's
+    /// lag lets in at the onset. 0 keeps the intrusion alone.
+    pub reflex_integral_gain_per_s: f64,
     /// A collision ends the flight (`"end_reason": "crashed"`) unless this is true (the CLI's
     /// `--allow-collisions`, for debugging). Default false.
     pub allow_collisions: bool,
@@ -71,6 +79,7 @@ impl Default for SafetyConfig {
             median_window: 15,
             max_correction_rate_mps: 0.5,
             fade_time_s: 20.0,
+            reflex_integral_gain_per_s: 2.0,
             allow_collisions: false,
         }
     }
@@ -98,6 +107,10 @@ impl SafetyConfig {
             if !(value.is_finite() && value > 0.0) {
                 return Err(format!("`{key}` = {value}: must be a positive number"));
             }
+        }
+        if !(self.reflex_integral_gain_per_s.is_finite() && self.reflex_integral_gain_per_s >= 0.0)
+        {
+            return Err("`safety.reflex_integral_gain_per_s` must be ≥ 0".into());
         }
         if !(self.rangefinder_sigma_m.is_finite() && self.rangefinder_sigma_m >= 0.0) {
             return Err("`safety.rangefinder_sigma_m` must be ≥ 0".into());
@@ -152,6 +165,9 @@ pub struct SafetyMonitor {
     climb_m: f64,
     /// The climb when the intrusion in progress began, metres.
     climb_at_onset_m: f64,
+    /// The integral part of the reflex over the intrusion in progress, metres: the gain times
+    /// the intrusion, summed over time since its onset.
+    reflex_integral_m: f64,
     /// The back-away commanded by interventions of the depth camera, world ENU metres, pointing
     /// towards the surface backed away from.
     retreat_xy_m: Vector2<f64>,
@@ -173,6 +189,7 @@ impl SafetyMonitor {
             correction_m: 0.0,
             climb_m: 0.0,
             climb_at_onset_m: 0.0,
+            reflex_integral_m: 0.0,
             retreat_xy_m: Vector2::zeros(),
             retreat_at_onset_xy_m: Vector2::zeros(),
             previous_time_s: None,
@@ -255,21 +272,24 @@ impl SafetyMonitor {
         if intervention_started {
             self.climb_at_onset_m = self.climb_m;
             self.retreat_at_onset_xy_m = self.retreat_xy_m;
+            self.reflex_integral_m = 0.0;
         }
         match sensed {
-            // Climb by the whole intrusion at once (the reflex, not the smoothing), and never
-            // less while it lasts: the vehicle lags the command, so a shrinking intrusion means
-            // the climb is working.
+            // Climb by the whole intrusion at once (the reflex, not the smoothing), plus its
+            // integral while it lasts, and never less: the vehicle lags the command, so a
+            // shrinking intrusion means the climb is working, and an intrusion that holds means
+            // something (the estimate's walk) pushes back.
             Some(s) if inside => {
-                self.climb_m = self
-                    .climb_m
-                    .max(self.climb_at_onset_m + c.safety_radius_m - s);
+                let intrusion = c.safety_radius_m - s;
+                self.reflex_integral_m += c.reflex_integral_gain_per_s * intrusion * dt;
+                let reflex = intrusion + self.reflex_integral_m;
+                self.climb_m = self.climb_m.max(self.climb_at_onset_m + reflex);
                 // The same, away from the camera's nearest surface, where that is the nearest.
                 if let (Some(depth), Some(toward)) =
                     (senses.nearest_depth_m, senses.nearest_depth_toward_xy)
                     && depth <= s
                 {
-                    let retreat = self.retreat_at_onset_xy_m + toward * (c.safety_radius_m - s);
+                    let retreat = self.retreat_at_onset_xy_m + toward * reflex;
                     if retreat.norm() > self.retreat_xy_m.norm() {
                         self.retreat_xy_m = retreat;
                     }
@@ -398,17 +418,21 @@ mod tests {
         let step = monitor.update(0.0, &near);
         assert!(step.intervention_started);
         assert!((step.vertical_correction_m + 0.3).abs() < 1e-12, "{step:?}");
+        // Held: not re-added, only grown by the integral part (2/s × 0.3 m × 0.05 s).
         let held = monitor.update(0.05, &near);
         assert!(!held.intervention_started);
-        assert_eq!(
-            held.vertical_correction_m, step.vertical_correction_m,
-            "not re-added"
+        assert!(
+            (held.vertical_correction_m + 0.33).abs() < 1e-12,
+            "{held:?}"
         );
         let deeper = Senses {
             nearest_depth_m: Some(0.4),
             ..Senses::default()
         };
-        assert!((monitor.update(0.06, &deeper).vertical_correction_m + 0.4).abs() < 1e-12);
+        let integral = 0.03 + 2.0 * 0.4 * 0.01;
+        assert!(
+            (monitor.update(0.06, &deeper).vertical_correction_m + 0.4 + integral).abs() < 1e-12
+        );
         let clear = Senses {
             nearest_depth_m: Some(3.0),
             ..Senses::default()
@@ -438,13 +462,15 @@ mod tests {
         assert!(step.intervention_started);
         assert!((step.retreat_xy_m - east * 0.3).norm() < 1e-12, "{step:?}");
         assert!((step.vertical_correction_m + 0.3).abs() < 1e-12);
-        // Deeper: more; shallower while it lasts: kept.
+        // Deeper: more (and its integral, 2/s × 0.4 m × 0.05 s); shallower while it lasts:
+        // kept.
         let deeper = Senses {
             nearest_depth_m: Some(0.4),
             ..beside
         };
-        assert!((monitor.update(0.05, &deeper).retreat_xy_m - east * 0.4).norm() < 1e-12);
-        assert!((monitor.update(0.1, &beside).retreat_xy_m - east * 0.4).norm() < 1e-12);
+        let deepest = east * 0.44;
+        assert!((monitor.update(0.05, &deeper).retreat_xy_m - deepest).norm() < 1e-12);
+        assert!((monitor.update(0.1, &beside).retreat_xy_m - deepest).norm() < 1e-12);
         // Clear for long: it fades.
         for k in 0..4000 {
             monitor.update(0.2 + 0.05 * f64::from(k), &Senses::default());
@@ -461,6 +487,60 @@ mod tests {
         let step = monitor.update(0.0, &below);
         assert!(step.intervention_started);
         assert_eq!(step.retreat_xy_m, Vector2::zeros(), "the nearest is below");
+    }
+
+    /// Closest true approach to a wall 1.5 m east of a hovering vehicle while the estimate
+    /// walks west at `walk_mps` for 20 s (the controller, holding its place in the estimate's
+    /// frame, carries the truth east by as much), the depth camera reporting the wall: the
+    /// real controller and airframe of the mission, the monitor in the loop as the mission
+    /// runs it (the back-away added to the position the controller flies on, every 0.05 s).
+    fn closest_approach_to_a_wall_m(walk_mps: f64, config: &SafetyConfig) -> f64 {
+        let planning = scarp_planning::prelude::PlanningConfig::default();
+        let mut motion = crate::mission::motion::MotionSystem::new(
+            &planning.flight,
+            Point3::new(0.0, 0.0, 10.0),
+            0.0,
+        )
+        .unwrap();
+        let wall_x_m = 1.5;
+        let mut monitor = SafetyMonitor::new(config);
+        let mut closest_m = f64::INFINITY;
+        for k in 1..=1200 {
+            let t = 0.05 * f64::from(k);
+            let walk_m = walk_mps * t.min(20.0);
+            let retreat = monitor.retreat_xy_m();
+            let flown = nalgebra::Vector3::new(retreat.x - walk_m, retreat.y, -monitor.climb_m());
+            motion.advance_to(t, &flown).unwrap();
+            let distance_m = wall_x_m - motion.state().position_m.x;
+            closest_m = closest_m.min(distance_m);
+            monitor.update(
+                t,
+                &Senses {
+                    nearest_depth_m: Some(distance_m),
+                    nearest_depth_toward_xy: Some(Vector2::new(1.0, 0.0)),
+                    ..Senses::default()
+                },
+            );
+        }
+        closest_m
+    }
+
+    /// The walk of session 55's library-b seed 62 (1 m in 11 s) and the GPS preset's 1σ walk
+    /// over a second (σ 0.5 m, correlation 30 s: 0.5·√(2/30) = 0.13 m/s) keep the vehicle
+    /// 0.5 m or more from the wall (the collision radius is 0.3 m, the safety radius 0.8 m);
+    /// with the intrusion alone as the reflex, both come nearer (0.24 m and through the wall).
+    #[test]
+    fn a_walk_towards_a_wall_cannot_push_the_vehicle_through_the_reflex() {
+        for walk_mps in [0.09, 0.13] {
+            let closest_m = closest_approach_to_a_wall_m(walk_mps, &SafetyConfig::default());
+            assert!(closest_m >= 0.5, "walk {walk_mps} m/s: {closest_m:.3} m");
+            let proportional_only = SafetyConfig {
+                reflex_integral_gain_per_s: 0.0,
+                ..SafetyConfig::default()
+            };
+            let without = closest_approach_to_a_wall_m(walk_mps, &proportional_only);
+            assert!(without < 0.5, "walk {walk_mps} m/s: {without:.3} m");
+        }
     }
 
     #[test]
