@@ -1339,7 +1339,7 @@ mod tests {
         let rock = world.targets().next().unwrap();
         let config = MissionConfig::default();
         let camera = PinholeCamera::from_hfov(160, 120, 87.0).unwrap();
-        let cylinder = rock_cylinder(&world, rock, &Vector3::zeros(), &config.cylinder).unwrap();
+        let cylinder = rock_cylinder(world, rock, &Vector3::zeros(), &config.cylinder).unwrap();
         let session = MappingSession::new(1, &cylinder, &camera, &config).unwrap();
         let centre = rock.centroid;
         let renderer = scarp_datasets::render::Renderer::new(world);
