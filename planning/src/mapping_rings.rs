@@ -339,6 +339,23 @@ pub fn scan_depressions_rad(camera: &CameraConfig, cfg: &MappingRingConfig) -> (
     (g + hb, g - hb)
 }
 
+/// The pitch below the horizon (degrees, clamped to ±89°) that points a camera at
+/// `position_m` (world, m) at the point where `ring`'s optical axis, at the ring's pitch and
+/// radius, meets the ring's axis.
+fn aim_pitch_down_deg(ring: &Ring, position_m: &Point3<f64>) -> f64 {
+    const LIMIT_DEG: f64 = 89.0;
+    let aim_z_m = ring.z_m - ring.radius_m * ring.camera_pitch_down_deg.to_radians().tan();
+    let off_axis_m = Vector2::new(
+        position_m.x - ring.center_x_m,
+        position_m.y - ring.center_y_m,
+    )
+    .norm();
+    (position_m.z - aim_z_m)
+        .atan2(off_axis_m)
+        .to_degrees()
+        .clamp(-LIMIT_DEG, LIMIT_DEG)
+}
+
 /// One horizontal ring.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Ring {
@@ -482,6 +499,44 @@ impl RingPlan {
                     w[0].1 + (w[1].1 - w[0].1) * (z_m - w[0].0) / span
                 }
             })
+    }
+
+    /// Camera pitch below the horizon (degrees) for a vehicle at `position_m` (world frame, m)
+    /// while it flies this plan. Between the lowest and the highest ring it is
+    /// [`Self::camera_pitch_down_deg_at`]. Above the highest ring (or below the lowest) the
+    /// camera aims at the point where that ring's optical axis meets the cylinder's axis, so
+    /// it keeps that ring's view of the target on the way to or from it. On the ring itself
+    /// this is the ring's pitch. It is clamped to ±89°; `default_deg` when the plan has no
+    /// rings.
+    ///
+    /// Why: with the ring's own pitch held all the way, the neck ring's descent from 7.5 m
+    /// (library-b seed 60) pitched the camera 20° down from 4 m above the neck. The rock left
+    /// the view for 3 s, and the ring's guarded mapping stopped on the re-acquisition. The
+    /// mission aims so on the neck ring only: rings whose mapping ends on cylinder coverage
+    /// would count the steep views of the descent and end before their low rings.
+    pub fn camera_pitch_down_deg_toward(&self, position_m: &Point3<f64>, default_deg: f64) -> f64 {
+        let by_height = |pick_highest: bool| {
+            self.rings.iter().copied().reduce(|a, b| {
+                let b_wins = if pick_highest {
+                    b.z_m > a.z_m
+                } else {
+                    b.z_m < a.z_m
+                };
+                if b_wins { b } else { a }
+            })
+        };
+        let (Some(lowest), Some(highest)) = (by_height(false), by_height(true)) else {
+            return default_deg;
+        };
+        let z_m = position_m.z;
+        let aimed_ring = if z_m > highest.z_m {
+            highest
+        } else if z_m < lowest.z_m {
+            lowest
+        } else {
+            return self.camera_pitch_down_deg_at(z_m, default_deg);
+        };
+        aim_pitch_down_deg(&aimed_ring, position_m)
     }
 
     /// The way out of the rings from `here` (world frame, m) up to `altitude_m`: first level and
@@ -1562,17 +1617,22 @@ mod tests {
         assert_eq!(plan_paper.rings[0].z_m, plan.rings[1].z_m);
     }
 
-    #[test]
-    fn camera_pitch_follows_the_rings_by_height() {
+    /// The default plan round a rock 1 m in radius and 3 m high, from 10 m off at 8 m up.
+    fn default_plan_round_a_3m_rock() -> RingPlan {
         let cyl = VerticalCylinder::new(0.0, 0.0, 1.0, 0.0, 3.0).unwrap();
         let start = Waypoint::new(Point3::new(10.0, 0.0, 8.0), 0.0);
-        let plan = plan_mapping_rings(
+        plan_mapping_rings(
             &cyl,
             &start,
             &CameraConfig::default(),
             &MappingRingConfig::default(),
         )
-        .unwrap();
+        .unwrap()
+    }
+
+    #[test]
+    fn camera_pitch_follows_the_rings_by_height() {
+        let plan = default_plan_round_a_3m_rock();
         let (z0, z1) = (plan.rings[0].z_m, plan.rings[1].z_m);
         assert_eq!(plan.camera_pitch_down_deg_at(z0 - 1.0, 55.0), 20.0);
         assert_eq!(plan.camera_pitch_down_deg_at(z0, 55.0), 20.0);
@@ -1583,6 +1643,46 @@ mod tests {
             ..plan
         };
         assert_eq!(empty.camera_pitch_down_deg_at(3.0, 55.0), 55.0);
+    }
+
+    #[test]
+    fn camera_aims_at_the_nearest_rings_view_above_and_below_the_rings() {
+        let plan = default_plan_round_a_3m_rock();
+        let (low, high) = (plan.rings[0], *plan.rings.last().unwrap());
+        let on_ring = |ring: &Ring| Point3::new(ring.radius_m, 0.0, ring.z_m);
+        // On each ring: its own pitch; between rings: the height rule.
+        for ring in [&low, &high] {
+            let pitch = plan.camera_pitch_down_deg_toward(&on_ring(ring), 55.0);
+            assert!((pitch - ring.camera_pitch_down_deg).abs() < 1e-9, "{pitch}");
+        }
+        let mid = Point3::new(7.0, 3.0, 0.5 * (low.z_m + high.z_m));
+        assert_eq!(
+            plan.camera_pitch_down_deg_toward(&mid, 55.0),
+            plan.camera_pitch_down_deg_at(mid.z, 55.0)
+        );
+        // Above the highest ring, the camera's axis passes through the highest ring's aim
+        // point on the cylinder's axis, and it looks further down the higher it is.
+        let aim_z = high.z_m - high.radius_m * high.camera_pitch_down_deg.to_radians().tan();
+        let mut last_deg = high.camera_pitch_down_deg;
+        for dz in [0.5, 2.0, 4.0] {
+            let above = Point3::new(0.0, -high.radius_m, high.z_m + dz);
+            let pitch = plan.camera_pitch_down_deg_toward(&above, 55.0);
+            let hits_z = above.z - high.radius_m * pitch.to_radians().tan();
+            assert!((hits_z - aim_z).abs() < 1e-9, "dz {dz}: axis at z {hits_z}");
+            assert!(pitch > last_deg, "dz {dz}: {pitch} after {last_deg}");
+            last_deg = pitch;
+        }
+        // Below the lowest, it looks up towards the lowest ring's aim point.
+        let below = Point3::new(low.radius_m, 0.0, low.z_m - 3.0);
+        assert!(plan.camera_pitch_down_deg_toward(&below, 55.0) < low.camera_pitch_down_deg);
+        // Straight over the axis, it stays inside the mount's limits.
+        let over = Point3::new(0.0, 0.0, high.z_m + 5.0);
+        assert_eq!(plan.camera_pitch_down_deg_toward(&over, 55.0), 89.0);
+        let empty = RingPlan {
+            rings: Vec::new(),
+            ..plan
+        };
+        assert_eq!(empty.camera_pitch_down_deg_toward(&mid, 55.0), 55.0);
     }
 
     #[test]
