@@ -208,6 +208,15 @@ pub struct NeckRingConfig {
     /// the ring looks at the base from above as the base ring does (a rock sitting on the
     /// ground, with no pedestal, gets no neck ring).
     pub max_lift_above_neck_m: f64,
+    /// On the way to the ring and out of it, above or below its height, aim the camera at the
+    /// ring's view of the rock ([`RingPlan::camera_pitch_down_deg_toward`]) instead of holding
+    /// the ring's pitch. Default false. Flown in session 57 (seeds 60 and 62 of the two library
+    /// worlds, against session 56): three guarded stretches that had stopped on a
+    /// re-acquisition in their first seconds ran on (16 → 876, 12 → 260 and 17 → 540 frames),
+    /// but library-a seed 62's double rock went from +5.25° to refused (43% patched) and its
+    /// slab from +0.62° to +42.1° (inside an interval 72° wide). Too few flights to tell the
+    /// aim's part in those two from the rest of the path's changes.
+    pub aim_on_approach: bool,
 }
 
 impl Default for NeckRingConfig {
@@ -218,6 +227,7 @@ impl Default for NeckRingConfig {
             camera_pitch_down_deg: 20.0,
             min_clearance_m: 1.0,
             max_lift_above_neck_m: 0.3,
+            aim_on_approach: false,
         }
     }
 }

@@ -424,6 +424,27 @@ impl Default for MappingConfig {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::path::Path;
+
+    /// The campaign documents' configurations still load, so their commands still run.
+    #[test]
+    fn the_campaign_tools_configs_load() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("docs/campaigns/tools");
+        let mut loaded = 0;
+        for entry in std::fs::read_dir(&dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.extension().is_some_and(|e| e == "toml") {
+                let text = std::fs::read_to_string(&path).unwrap();
+                let config = MissionConfig::from_toml_str(&text, &path.display().to_string())
+                    .unwrap_or_else(|e| panic!("{e}"));
+                let neck = config.planning.mapping.neck_ring;
+                let is_neck_aim = path.ends_with("neck_aim.toml");
+                assert_eq!(neck.aim_on_approach, is_neck_aim, "{}", path.display());
+                loaded += 1;
+            }
+        }
+        assert!(loaded >= 6, "{loaded} configs in {}", dir.display());
+    }
 
     #[test]
     fn defaults_round_trip_through_toml() {

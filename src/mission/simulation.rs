@@ -581,18 +581,26 @@ impl<'a> Mission<'a> {
     }
 
     /// Turns the camera mount toward the pitch the mapping rings ask for at the reference, or
-    /// toward γ outside mapping. On the way to the neck ring the camera aims at the ring's
-    /// view ([`RingPlan::camera_pitch_down_deg_toward`]); on the other rings it takes the
-    /// pitch of the reference's height ([`RingPlan::camera_pitch_down_deg_at`]).
+    /// toward γ outside mapping: the pitch of the reference's height
+    /// ([`RingPlan::camera_pitch_down_deg_at`]). On the way to the neck ring, with
+    /// `neck_ring.aim_on_approach`, the camera aims at the ring's view instead
+    /// ([`RingPlan::camera_pitch_down_deg_toward`]).
     ///
-    /// Why not aim on the other rings too: their mapping ends on the coverage cells, which
+    /// Why not aim on the other rings: their mapping ends on the coverage cells, which
     /// stand on the rock's bounding cylinder. Aimed on the descent from the localization
     /// altitude, the camera sees those cells at steep angles and ends mapping before the low
     /// rings are flown (session 57: default seed 0's rock 1 refused, 64% of it patched).
     fn slew_mount(&mut self, t: f64) {
         let camera = &self.inputs.config.planning.camera;
         let here = self.sensors.vehicle().current_waypoint().position_m;
-        let aim_at_the_ring = self.neck_ring == NeckRingStage::Flying;
+        let aim_at_the_ring = self.neck_ring == NeckRingStage::Flying
+            && self
+                .inputs
+                .config
+                .planning
+                .mapping
+                .neck_ring
+                .aim_on_approach;
         let target_deg = self
             .ring_plan
             .as_ref()
