@@ -525,17 +525,11 @@ impl RingPlan {
     /// mission aims so on the neck ring only: rings whose mapping ends on cylinder coverage
     /// would count the steep views of the descent and end before their low rings.
     pub fn camera_pitch_down_deg_toward(&self, position_m: &Point3<f64>, default_deg: f64) -> f64 {
-        let by_height = |pick_highest: bool| {
-            self.rings.iter().copied().reduce(|a, b| {
-                let b_wins = if pick_highest {
-                    b.z_m > a.z_m
-                } else {
-                    b.z_m < a.z_m
-                };
-                if b_wins { b } else { a }
-            })
-        };
-        let (Some(lowest), Some(highest)) = (by_height(false), by_height(true)) else {
+        let by_height = |a: &&Ring, b: &&Ring| a.z_m.total_cmp(&b.z_m);
+        let (Some(lowest), Some(highest)) = (
+            self.rings.iter().min_by(by_height),
+            self.rings.iter().max_by(by_height),
+        ) else {
             return default_deg;
         };
         let z_m = position_m.z;
@@ -546,7 +540,7 @@ impl RingPlan {
         } else {
             return self.camera_pitch_down_deg_at(z_m, default_deg);
         };
-        aim_pitch_down_deg(&aimed_ring, position_m)
+        aim_pitch_down_deg(aimed_ring, position_m)
     }
 
     /// The way out of the rings from `here` (world frame, m) up to `altitude_m`: first level and

@@ -591,16 +591,11 @@ impl<'a> Mission<'a> {
     /// altitude, the camera sees those cells at steep angles and ends mapping before the low
     /// rings are flown (session 57: default seed 0's rock 1 refused, 64% of it patched).
     fn slew_mount(&mut self, t: f64) {
-        let camera = &self.inputs.config.planning.camera;
+        let planning = &self.inputs.config.planning;
+        let camera = &planning.camera;
         let here = self.sensors.vehicle().current_waypoint().position_m;
-        let aim_at_the_ring = self.neck_ring == NeckRingStage::Flying
-            && self
-                .inputs
-                .config
-                .planning
-                .mapping
-                .neck_ring
-                .aim_on_approach;
+        let aim_at_the_ring =
+            self.neck_ring == NeckRingStage::Flying && planning.mapping.neck_ring.aim_on_approach;
         let target_deg = self
             .ring_plan
             .as_ref()
