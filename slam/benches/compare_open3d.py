@@ -17,7 +17,8 @@ Setup (Debian):  apt-get install libusb-1.0-0 libgomp1
                  pip install open3d-cpu==0.19.0   (0.20's CPU wheel gives empty TSDF meshes)
 Usage:           scarp render --path orbit --frames 120 --seed 3 --out /tmp/orbit
                  python3 slam/benches/compare_open3d.py /tmp/orbit --voxel 0.01 --max-depth 8 \
-                     [--roi cyl:x,y,z0,z1,r] --scarp target/release/scarp [--repeat 3]
+                     [--roi cyl:x,y,z0,z1,r] --scarp target/release/scarp [--repeat 3] \
+                     [--gt rock_1.ply]   (from `scarp world --out DIR`: both meshes scored)
                  or, from a map.json made beforehand:
                  scarp map /tmp/orbit --poses groundtruth --voxel 0.01 --out /tmp/map --json
                  python3 slam/benches/compare_open3d.py /tmp/orbit --voxel 0.01 [--frames N] \
@@ -97,6 +98,12 @@ def main():
     )
     parser.add_argument("--scarp", type=Path, help="scarp binary: run `scarp map` in this run")
     parser.add_argument(
+        "--gt", type=Path,
+        help="with --scarp: a ground-truth mesh (PLY, e.g. rock_1.ply from `scarp world`) that "
+             "both tools' meshes are scored against with `scarp eval mesh --crop-to-gt 0.1` at "
+             "1 and 2 cm, so a speed-up is read beside what each tool's work bought",
+    )
+    parser.add_argument(
         "--repeat", type=int, default=1,
         help="with --scarp: rounds of scarp then Open3D, back to back; prints every round's "
              "speed-ups and their median (a shared machine's load moves both tools' times)",
@@ -106,16 +113,25 @@ def main():
         parser.error("--repeat must be at least 1")
     if args.repeat > 1 and not args.scarp:
         parser.error("--repeat needs --scarp (both tools timed in each round)")
+    if args.gt and not args.scarp:
+        parser.error("--gt needs --scarp (its `eval mesh` scores both meshes)")
     if args.scarp and args.frames != 0:
         # scarp map fuses the whole sequence: timing Open3D on fewer frames is not the same work.
         parser.error("--scarp runs scarp map on every frame: use it with --frames 0")
     roi_text = args.roi
     args.roi = parse_roi(args.roi) if args.roi else None
+    if args.gt and not args.save_mesh:
+        # Open3D's mesh must reach a file for `scarp eval mesh`.
+        scratch = Path(tempfile.mkdtemp(prefix="open3d_mesh_"))
+        atexit.register(shutil.rmtree, scratch, ignore_errors=True)
+        args.save_mesh = scratch / "mesh.ply"
     rounds = []
     for _ in range(args.repeat):
         if args.scarp:
             args.scarp_map = run_scarp_map(args, roi_text)
         rounds.append(one_round(args))
+        if args.gt:
+            rounds[-1]["mesh_scores"] = score_meshes(args)
         if args.scarp:
             # Read: its meshes need not wait for the exit (hundreds of MB on a full frame).
             shutil.rmtree(args.scarp_map.parent, ignore_errors=True)
@@ -151,7 +167,32 @@ def one_round(args):
             if ours_key in ours and k in result and ours[ours_key] > 0:
                 speedup[k] = result[k] / ours[ours_key]
         result["open3d_over_scarp"] = speedup
+        if ours.get("blocks_updated_median") and result.get("blocks_updated_median"):
+            # > 1: scarp updates more blocks per frame (its band walk is exact; Open3D's
+            # allocation samples one pixel in 16 and four points along each band).
+            result["blocks_updated_scarp_over_open3d"] = (
+                ours["blocks_updated_median"] / result["blocks_updated_median"]
+            )
     return result
+
+
+def score_meshes(args):
+    """F-score, precision and recall at 1 and 2 cm of Open3D's and scarp's meshes of this round
+    against --gt (`scarp eval mesh`, reconstruction farther than 0.1 m from the truth's bounding
+    box ignored, as `scarp map --world` scores)."""
+    meshes = {"open3d": args.save_mesh, "scarp": args.scarp_map.parent / "mesh.ply"}
+    scores = {}
+    for tool, mesh in meshes.items():
+        for tau in (0.01, 0.02):
+            command = [str(args.scarp.resolve()), "eval", "mesh", "--gt", str(args.gt),
+                       "--mesh", str(mesh), "--tau", str(tau), "--crop-to-gt", "0.1",
+                       "--json", "--log", "warn"]
+            run = subprocess.run(command, check=True, capture_output=True, text=True)
+            score = json.loads(run.stdout)
+            scores.setdefault(tool, {})[f"tau_{tau:g}"] = {
+                k: score[k] for k in ("fscore", "precision", "recall")
+            }
+    return scores
 
 
 def run_scarp_map(args, roi_text):
