@@ -102,7 +102,7 @@ def main():
     parser.add_argument(
         "--same-blocks", action="store_true",
         help="Open3D integrates, in each frame, the blocks scarp's exact band walk updates "
-             "(every pixel's truncation band, sampled every half centimetre, outside the timer) "
+             "(every pixel's truncation band, sampled every half voxel, outside the timer) "
              "rather than those its own allocation samples (one pixel in 16): the same voxel "
              "work on both sides; its times are printed under same_blocks, its speed-ups as "
              "open3d_over_scarp's *_same_blocks",
@@ -327,24 +327,25 @@ def compare_odometry(args):
     }
 
 
-def band_block_coordinates(depth_m, intrinsic, world_from_camera, truncation, voxel, max_depth):
+def band_block_coordinates(depth_m, intrinsic, world_from_camera, truncation_m, voxel_m,
+                           max_depth_m):
     """The blocks (n×3 int array) that the truncation bands of every pixel with a depth in
-    (0, max_depth] cross, as scarp's exact walk finds them: each band sampled every half voxel
+    (0, max_depth_m] cross, as scarp's exact walk finds them: each band sampled every half voxel
     (blocks are 8 voxels) from depth − truncation to depth + truncation. A block is 8 voxels with
     voxel centres at multiples of the voxel size, so block b spans [8b − ½, 8b + 7½) voxels."""
-    v, u = np.nonzero((depth_m > 0) & (depth_m <= max_depth))
+    v, u = np.nonzero((depth_m > 0) & (depth_m <= max_depth_m))
     z = depth_m[v, u]
     rays = np.stack(
         [(u - intrinsic[0, 2]) / intrinsic[0, 0], (v - intrinsic[1, 2]) / intrinsic[1, 1],
          np.ones_like(z)], axis=1,
     )
     rotation, origin = world_from_camera[:3, :3], world_from_camera[:3, 3]
-    block = 8 * voxel
-    steps = int(math.ceil(2 * truncation / (0.5 * voxel))) + 1
+    block_m = 8 * voxel_m
+    steps = int(math.ceil(2 * truncation_m / (0.5 * voxel_m))) + 1
     found = []
-    for t in np.linspace(-truncation, truncation, steps):
+    for t in np.linspace(-truncation_m, truncation_m, steps):
         points = (rays * (z + t)[:, None]) @ rotation.T + origin
-        cells = np.floor((points + 0.5 * voxel) / block).astype(np.int64)
+        cells = np.floor((points + 0.5 * voxel_m) / block_m).astype(np.int64)
         # One int64 key per block (21 bits an axis, as scarp packs them): a 1-D unique is
         # many times faster than numpy's unique over rows.
         found.append(np.unique(((cells[:, 0] + (1 << 20)) << 42) | ((cells[:, 1] + (1 << 20)) << 21)
@@ -380,20 +381,20 @@ def compare_tsdf(args, band_blocks=False):
     )
     times_ms = []
     active_blocks = []
-    # Every frame's band blocks are found before any frame is timed: numpy's threaded matrix
-    # products leave their threads spinning for a while, which slowed the integration timed
-    # right after them by up to 3x.
-    exact = [
-        band_block_coordinates(
-            o3d.t.io.read_image(str(seq / depth[i][1])).as_tensor().numpy()[:, :, 0]
-            .astype(np.float64) / cam["depth_scale"],
-            intrinsic.numpy(),
-            np.linalg.inv(camera_from_world(*map(float, poses[i][1:8]))),
-            4.0 * args.voxel, args.voxel, args.max_depth,
-        )
-        for i in range(n)
-    ] if band_blocks else None
     if band_blocks:
+        # Every frame's band blocks are found before any frame is timed: numpy's threaded
+        # matrix products leave their threads spinning for a while, which slowed the
+        # integration timed right after them by up to 3x.
+        exact = [
+            band_block_coordinates(
+                o3d.t.io.read_image(str(seq / depth[i][1])).as_tensor().numpy()[:, :, 0]
+                .astype(np.float64) / cam["depth_scale"],
+                intrinsic.numpy(),
+                np.linalg.inv(camera_from_world(*map(float, poses[i][1:8]))),
+                4.0 * args.voxel, args.voxel, args.max_depth,
+            )
+            for i in range(n)
+        ]
         time.sleep(1.0)
     for i in range(n):
         d = o3d.t.io.read_image(str(seq / depth[i][1])).to(device)
