@@ -17,6 +17,7 @@
 
 mod hash;
 mod integrate;
+mod lanes;
 pub mod raycast;
 mod roi;
 #[cfg(test)]
