@@ -170,16 +170,10 @@ pub(super) fn integrate(
     }
     let kernel = Kernel::new(&volume.config, camera, world_from_camera);
     let depth = frame.depth_m.as_slice();
-    // Each pixel's colour as one little-endian word (r, g, b, 0), the voxels' layout, so the
-    // kernel fetches a pixel's colour with one load.
     scratch.rgbx.clear();
-    scratch.rgbx.par_extend(
-        frame
-            .rgb
-            .as_slice()
-            .par_iter()
-            .map(|&[r, g, b]| u32::from_le_bytes([r, g, b, 0])),
-    );
+    scratch
+        .rgbx
+        .par_extend(frame.rgb.as_slice().par_iter().map(rgbx_word));
     let rgbx = &scratch.rgbx;
     volume
         .blocks
@@ -194,6 +188,13 @@ pub(super) fn integrate(
     };
     volume.scratch = scratch;
     Ok(stats)
+}
+
+/// A pixel's colour as the little-endian word (r, g, b, 0) that voxels store, so that the
+/// kernel fetches it with one load.
+#[inline]
+fn rgbx_word(&[r, g, b]: &[u8; 3]) -> u32 {
+    u32::from_le_bytes([r, g, b, 0])
 }
 
 /// Fills `scratch.keys` with the packed keys (sorted, unique) of the blocks that the truncation
@@ -575,10 +576,7 @@ fn floor_cell(p: &Vector3<f32>) -> BlockCoord {
 /// Lane-wise floor of non-negative values below 2^31 (truncation toward zero is the floor
 /// there), without the libm call `f32::floor` becomes on baseline x86-64.
 #[inline(always)]
-fn floor_small<F: Float8>(x: F) -> F
-where
-    F::Int: Int8<Float = F>,
-{
+fn floor_small<F: Float8>(x: F) -> F {
     x.fast_trunc_int().round_float()
 }
 
@@ -1067,12 +1065,7 @@ mod tests {
             let frame = scattered_frame(seed, range, 0.9..1.1);
             let kernel = Kernel::new(&config, &camera, &pose);
             let depth = frame.depth_m.as_slice();
-            let rgbx: Vec<u32> = frame
-                .rgb
-                .as_slice()
-                .iter()
-                .map(|&[r, g, b]| u32::from_le_bytes([r, g, b, 0]))
-                .collect();
+            let rgbx: Vec<u32> = frame.rgb.as_slice().iter().map(rgbx_word).collect();
             for ((a, b), coord) in portable.iter_mut().zip(&mut fast).zip(&coords) {
                 kernel.update_block_with(Portable, a, coord, depth, &rgbx);
                 kernel.update_block(b, coord, depth, &rgbx);

@@ -35,8 +35,8 @@ pub(super) trait Simd8: Copy {
 pub(super) trait Float8:
     Copy + Add<Output = Self> + Sub<Output = Self> + Mul<Output = Self> + Div<Output = Self>
 {
-    type Mask;
-    type Int;
+    type Mask: Mask8<Float = Self>;
+    type Int: Int8<Float = Self>;
     fn simd_ge(self, rhs: Self) -> Self::Mask;
     fn simd_gt(self, rhs: Self) -> Self::Mask;
     fn simd_lt(self, rhs: Self) -> Self::Mask;
