@@ -6,7 +6,9 @@
 //! cylinder, ≤ 100 ms for a 2 m rock, and the noisy full frame). Integration uses `scarp map`'s
 //! settings for a rendered sequence: the sensor's depth noise known (σ at 1 m from the stereo
 //! model, 0 for clean depth), with a block support of 4 for noisy pixels. Meshing takes the
-//! voxels seen by 3 frames or more (`scarp map --min-observations 3`).
+//! voxels seen by 3 frames or more (`scarp map --min-observations 3`). The noisy cylinder is
+//! integrated a second time with the nearest pixel's depth (`scarp map --depth-sample nearest`,
+//! Open3D's sampling rule).
 //!
 //! `cargo bench --bench tsdf`
 
@@ -16,7 +18,7 @@ use scarp_datasets::render::Renderer;
 use scarp_datasets::sensor::SensorConfig;
 use scarp_datasets::world::World;
 use scarp_slam::meshing::{MeshingConfig, extract_mesh, remove_small_components};
-use scarp_slam::tsdf::{Roi, TsdfConfig, TsdfVolume};
+use scarp_slam::tsdf::{DepthSample, Roi, TsdfConfig, TsdfVolume};
 use scarp_slam::{PinholeCamera, RgbdFrame};
 
 fn bench(c: &mut Criterion) {
@@ -87,6 +89,27 @@ fn bench(c: &mut Criterion) {
                     })
                 },
             );
+            if roi.is_some() && noise == "noisy" {
+                let mut nearest = TsdfVolume::new(TsdfConfig {
+                    depth_sample: DepthSample::Nearest,
+                    ..volume.config().clone()
+                })
+                .expect("config");
+                for (f, p) in frames.iter().zip(&poses) {
+                    nearest.integrate(f, &camera, p).expect("integrate");
+                }
+                group.bench_function(
+                    format!("integrate 640x480 frame, 1 cm, {region}, {noise}, nearest pixel"),
+                    |b| {
+                        b.iter(|| {
+                            k = (k + 1) % frames.len();
+                            nearest
+                                .integrate(&frames[k], &camera, &poses[k])
+                                .expect("integrate")
+                        })
+                    },
+                );
+            }
             let mesh = (roi.is_some() && noise == "clean") || (roi.is_none() && noise == "noisy");
             if mesh {
                 group.bench_function(format!("marching cubes, 1 cm, {region}, {noise}"), |b| {

@@ -52,7 +52,7 @@ use scarp_slam::mapping::{
     TrackingReferenceKind, odometry_nees, refine_keyframes, reprojection_stats,
 };
 use scarp_slam::meshing::{MeshingConfig, extract_mesh, remove_small_components};
-use scarp_slam::tsdf::{Roi, TsdfConfig, TsdfVolume};
+use scarp_slam::tsdf::{DepthSample, Roi, TsdfConfig, TsdfVolume};
 use serde::Deserialize;
 
 use scarp::evaluation::mesh::{MeshEvalConfig, evaluate_mesh};
@@ -97,6 +97,11 @@ pub struct MapArgs {
     /// allocate nothing; 1 (wherever any band reaches) when it is not.
     #[arg(long)]
     pub min_block_support: Option<u32>,
+    /// How a voxel reads the depth at its projection: `bilinear` between the four pixels around
+    /// it where they agree (the default), or the `nearest` pixel, as Open3D does (about 30% less
+    /// integration work; each view then fuses as a half-pixel staircase).
+    #[arg(long, value_enum, default_value = "bilinear")]
+    pub depth_sample: DepthSampleArg,
     /// The depth sensor's σ at 1 m, metres (σ grows as z²): pixels whose σ is within the
     /// truncation distance are precise. Default: the sequence's `camera.toml`
     /// (`depth_sigma_at_1m_m`, which `scarp render` writes), else unknown.
@@ -205,6 +210,24 @@ fn keyframe_config(args: &MapArgs) -> anyhow::Result<KeyframeConfig> {
     Ok(config)
 }
 
+/// `--depth-sample`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum DepthSampleArg {
+    /// Bilinear between agreeing neighbours, else the nearest pixel.
+    Bilinear,
+    /// The nearest pixel.
+    Nearest,
+}
+
+impl From<DepthSampleArg> for DepthSample {
+    fn from(arg: DepthSampleArg) -> Self {
+        match arg {
+            DepthSampleArg::Bilinear => DepthSample::Bilinear,
+            DepthSampleArg::Nearest => DepthSample::Nearest,
+        }
+    }
+}
+
 /// `--tracking-reference`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum TrackingReferenceArg {
@@ -229,6 +252,7 @@ pub fn run(args: MapArgs) -> anyhow::Result<()> {
     let mut config = TsdfConfig {
         voxel_size_m: args.voxel,
         roi: args.roi,
+        depth_sample: args.depth_sample.into(),
         ..TsdfConfig::default()
     };
     if let Some(m) = args.max_depth {

@@ -1,6 +1,7 @@
 //! End-to-end `scarp map` and `scarp eval mesh` on a short no-noise orbit of the default world:
 //! the cylinder ROI keeps memory under 10 % of the unrestricted map, and the target's mesh
-//! scores well against its ground truth (reduced version of the 120-frame figure).
+//! scores well against its ground truth (reduced version of the 120-frame figure), with
+//! either depth sample.
 
 mod common;
 use common::{first_rock_centroid_m, read_json as json, scarp_stdout as scarp};
@@ -65,26 +66,29 @@ fn map_and_evaluate_default_orbit() {
     );
     assert!(b_roi < 0.1 * b_full, "ROI blocks {b_roi} vs {b_full}");
     assert!(dir.path().join("roi/mesh.glb").exists());
-    let scores: serde_json::Value = serde_json::from_str(&scarp(&[
-        "eval",
-        "mesh",
-        "--gt",
-        &d("world/rock_1.ply"),
-        "--mesh",
-        &d("roi/mesh.ply"),
-        "--tau",
-        "0.01",
-        "--crop-to-gt",
-        "0.1",
-        "--visible-from",
-        &d("seq"),
-        "--world",
-        "default",
-        "--samples-per-m2",
-        "10000",
-        "--json",
-    ]))
-    .expect("json");
+    let score = |mesh: &str| -> serde_json::Value {
+        serde_json::from_str(&scarp(&[
+            "eval",
+            "mesh",
+            "--gt",
+            &d("world/rock_1.ply"),
+            "--mesh",
+            &d(mesh),
+            "--tau",
+            "0.01",
+            "--crop-to-gt",
+            "0.1",
+            "--visible-from",
+            &d("seq"),
+            "--world",
+            "default",
+            "--samples-per-m2",
+            "10000",
+            "--json",
+        ]))
+        .expect("json")
+    };
+    let scores = score("roi/mesh.ply");
     for key in [
         "accuracy_mean_m",
         "accuracy_median_m",
@@ -104,4 +108,27 @@ fn map_and_evaluate_default_orbit() {
     assert!(f >= 0.9, "F-score {f}: {scores}");
     let visible = scores["gt_visible_fraction"].as_f64().unwrap();
     assert!(visible > 0.5 && visible < 1.0, "visible fraction {visible}");
+
+    // The nearest pixel's depth: another mesh, as accurate.
+    scarp(&[
+        "map",
+        &d("seq"),
+        "--poses",
+        "groundtruth",
+        "--voxel",
+        "0.01",
+        "--roi",
+        &roi,
+        "--depth-sample",
+        "nearest",
+        "--out",
+        &d("nearest"),
+    ]);
+    let read = |mesh: &str| std::fs::read(dir.path().join(mesh)).expect("mesh");
+    assert_ne!(read("nearest/mesh.ply"), read("roi/mesh.ply"));
+    let f_nearest = score("nearest/mesh.ply")["fscore"].as_f64().unwrap();
+    assert!(
+        (f_nearest - f).abs() < 0.01,
+        "F-score {f_nearest} nearest, {f} bilinear"
+    );
 }

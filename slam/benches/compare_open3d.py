@@ -115,6 +115,12 @@ def main():
              "1 and 2 cm, so a speed-up is read beside what each tool's work bought",
     )
     parser.add_argument(
+        "--depth-sample", choices=["bilinear", "nearest"], default="bilinear",
+        help="with --scarp: `scarp map --depth-sample`. Open3D reads each voxel's depth from the "
+             "nearest pixel; scarp's default interpolates between agreeing pixels (four loads "
+             "and a blend per voxel). `nearest` times both tools on the same sampling rule",
+    )
+    parser.add_argument(
         "--repeat", type=int, default=1,
         help="with --scarp: rounds of scarp then Open3D, back to back; prints every round's "
              "speed-ups and their median (a shared machine's load moves both tools' times)",
@@ -147,6 +153,8 @@ def main():
             # Read: its meshes need not wait for the exit (hundreds of MB on a full frame).
             shutil.rmtree(args.scarp_map.parent, ignore_errors=True)
     result = rounds[-1]
+    if args.scarp:
+        result["scarp_depth_sample"] = args.depth_sample
     if args.repeat > 1:
         result["rounds"] = [r.get("open3d_over_scarp", {}) for r in rounds]
         result["median_open3d_over_scarp"] = {
@@ -230,7 +238,7 @@ def run_scarp_map(args, roi_text):
     # Resolved: `Path("./scarp")` prints as "scarp", which subprocess would look up on PATH.
     command = [str(args.scarp.resolve()), "map", str(args.sequence), "--poses", "groundtruth",
                "--voxel", str(args.voxel), "--max-depth", str(args.max_depth),
-               "--out", str(out), "--log", "warn"]
+               "--out", str(out), "--log", "warn", "--depth-sample", args.depth_sample]
     if roi_text:
         command += ["--roi", roi_text]
     # Open3D meshes weights above the threshold; scarp counts observations, at least N.

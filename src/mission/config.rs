@@ -281,6 +281,9 @@ pub struct MappingConfig {
     pub voxel_size_m: f64,
     /// Depth beyond this is not fused, metres. Default 5.
     pub max_depth_m: f64,
+    /// How the TSDF reads a voxel's depth: `"bilinear"` (default) or `"nearest"` (about 30% less
+    /// integration work); see [`scarp_slam::tsdf::DepthSample`].
+    pub depth_sample: scarp_slam::tsdf::DepthSample,
     /// The region of interest is the target's cylinder grown by this, metres. Default 1.0:
     /// the cylinder's error in the map frame (its box in the first mapped frame with
     /// `recenter_on_first_frame`, else the localization error plus the GPS walk since) must
@@ -403,6 +406,7 @@ impl Default for MappingConfig {
         Self {
             voxel_size_m: 0.01,
             max_depth_m: 5.0,
+            depth_sample: scarp_slam::tsdf::DepthSample::Bilinear,
             roi_margin_m: 1.0,
             roi_vertical_margin_m: 2.0,
             recenter_on_first_frame: true,

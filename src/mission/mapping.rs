@@ -416,6 +416,7 @@ impl MappingSession {
         let tsdf = TsdfConfig {
             voxel_size_m: m.voxel_size_m as f32,
             max_depth_m: m.max_depth_m as f32,
+            depth_sample: m.depth_sample,
             roi: Some(roi),
             ..TsdfConfig::default()
         };
@@ -1325,6 +1326,27 @@ mod tests {
             }
         }
         eprintln!("worst centre error {worst_m:.2} m");
+    }
+
+    #[test]
+    fn the_mapping_table_chooses_how_the_tsdf_samples_depth() {
+        let world = World::builtin_default().unwrap();
+        let rock = world.targets().next().unwrap();
+        let camera = PinholeCamera::from_hfov(160, 120, 87.0).unwrap();
+        let sample_of = |config: &MissionConfig| {
+            let cylinder =
+                rock_cylinder(&world, rock, &Vector3::zeros(), &config.cylinder).unwrap();
+            let session = MappingSession::new(1, &cylinder, &camera, config).unwrap();
+            session.tracker.volume().config().depth_sample
+        };
+        assert_eq!(
+            sample_of(&MissionConfig::default()),
+            scarp_slam::tsdf::DepthSample::Bilinear
+        );
+        let nearest: MissionConfig =
+            toml::from_str("[mapping]\ndepth_sample = \"nearest\"").unwrap();
+        assert_eq!(sample_of(&nearest), scarp_slam::tsdf::DepthSample::Nearest);
+        assert!(toml::from_str::<MissionConfig>("[mapping]\ndepth_sample = \"cubic\"").is_err());
     }
 
     /// A mapping session of the default world's first rock, and views round it: step `step`

@@ -16,7 +16,7 @@ use wide::f32x4;
 #[cfg(target_arch = "x86_64")]
 use super::lanes::{Avx2, avx2};
 use super::lanes::{Float8, Int8, Mask8, Portable, Simd8};
-use super::{BLOCK_SIDE, Block, BlockCoord, TsdfError, TsdfVolume};
+use super::{BLOCK_SIDE, Block, BlockCoord, DepthSample, TsdfError, TsdfVolume};
 use crate::frame::RgbdFrame;
 use crate::geometry::{PinholeCamera, check_finite_isometry};
 
@@ -601,6 +601,7 @@ struct Kernel {
     max_weight: f32,
     min_depth_m: f32,
     max_depth_m: f32,
+    depth_sample: DepthSample,
     /// AVX2 lanes when the running processor has them.
     #[cfg(target_arch = "x86_64")]
     avx2: Option<Avx2>,
@@ -631,6 +632,7 @@ impl Kernel {
             max_weight: config.max_weight,
             min_depth_m: config.min_depth_m,
             max_depth_m: config.max_depth_m,
+            depth_sample: config.depth_sample,
             #[cfg(target_arch = "x86_64")]
             avx2: avx2(),
         }
@@ -640,26 +642,55 @@ impl Kernel {
     /// in front of, or less than the truncation distance behind, the measured depth.
     ///
     /// Depth is sampled at the voxel's sub-pixel projection (u, v) (pixel centres at integers;
-    /// projections within half a pixel outside the outer centres are clamped onto them):
-    /// bilinear when the four neighbouring pixels are measured and agree
-    /// within half the truncation distance, otherwise the nearest of them (none when that one is
-    /// unmeasured). Colour comes from the nearest pixel. Observations weigh 1/z².
+    /// projections within half a pixel outside the outer centres are clamped onto them) as
+    /// [`DepthSample`] says: with `Bilinear`, bilinear when the four neighbouring pixels are
+    /// measured and agree within half the truncation distance, otherwise the nearest of them;
+    /// with `Nearest`, the nearest pixel. An unmeasured pixel (depth 0) observes nothing. Colour
+    /// comes from the nearest pixel. Observations weigh 1/z².
     ///
     /// Each row of eight voxels (along x) is one set of eight SIMD lanes: projection, depth
     /// interpolation, the TSDF and weight update and the colour blend are lane-wise and
     /// branch-free; only the pixel loads go voxel by voxel.
     fn update_block(&self, block: &mut Block, coord: &BlockCoord, depth: &[f32], rgbx: &[u32]) {
+        // One closure per sampling rule, each with its own kernel instance: with both behind
+        // one closure, LLVM stopped inlining it into the AVX2 function (see `lanes.rs`).
         #[cfg(target_arch = "x86_64")]
         if let Some(simd) = self.avx2 {
-            simd.vectorize(|| self.update_block_with(simd, block, coord, depth, rgbx));
+            match self.depth_sample {
+                DepthSample::Bilinear => simd.vectorize(|| {
+                    self.update_block_with::<_, false>(simd, block, coord, depth, rgbx)
+                }),
+                DepthSample::Nearest => simd.vectorize(|| {
+                    self.update_block_with::<_, true>(simd, block, coord, depth, rgbx)
+                }),
+            }
             return;
         }
-        self.update_block_with(Portable, block, coord, depth, rgbx);
+        self.update_block_portable(block, coord, depth, rgbx);
     }
 
-    /// [`Self::update_block`] in the lanes of `simd`, bit for bit the same result with any of them.
+    /// [`Self::update_block`] in `wide`'s portable lanes, whatever the processor has.
+    fn update_block_portable(
+        &self,
+        block: &mut Block,
+        coord: &BlockCoord,
+        depth: &[f32],
+        rgbx: &[u32],
+    ) {
+        match self.depth_sample {
+            DepthSample::Bilinear => {
+                self.update_block_with::<_, false>(Portable, block, coord, depth, rgbx)
+            }
+            DepthSample::Nearest => {
+                self.update_block_with::<_, true>(Portable, block, coord, depth, rgbx)
+            }
+        }
+    }
+
+    /// [`Self::update_block`] in the lanes of `simd`, bit for bit the same result with any of
+    /// them; the nearest pixel's depth when `NEAREST`, else [`DepthSample::Bilinear`]'s sample.
     #[inline(always)]
-    fn update_block_with<S: Simd8>(
+    fn update_block_with<S: Simd8, const NEAREST: bool>(
         &self,
         simd: S,
         block: &mut Block,
@@ -728,36 +759,55 @@ impl Kernel {
                 // `floor` call nor a saturating conversion); outside lanes read pixel (0, 0).
                 let u = inside.select(u.fast_max(zero).fast_min(u_last), zero);
                 let v = inside.select(v.fast_max(zero).fast_min(v_last), zero);
-                let (fu, fv) = (u - floor_small(u), v - floor_small(v));
-                // Index of the top-left pixel of the 2×2 neighbourhood, computed in f32 (exact:
-                // image sizes stay far below 2^24 pixels) and clamped so that every lane's
-                // neighbourhood lies in the image.
-                let quad_f = ((v - fv) * splat(w as f32) + (u - fu)).fast_min(last_quad);
-                let quad = quad_f.fast_trunc_int().to_array();
-                // Pixel loads (a gather: one voxel at a time).
-                let (mut d00, mut d01, mut d10, mut d11) =
-                    ([0.0f32; N], [0.0; N], [0.0; N], [0.0; N]);
-                for x in 0..N {
-                    let q = quad[x] as usize;
-                    let p = &depth[q..q + w + 2];
-                    (d00[x], d01[x], d10[x], d11[x]) = (p[0], p[1], p[w], p[w + 1]);
-                }
-                let (d00, d01, d10, d11) = (
-                    simd.f32s(d00),
-                    simd.f32s(d01),
-                    simd.f32s(d10),
-                    simd.f32s(d11),
-                );
-                let right = fu.simd_ge(half);
-                let below = fv.simd_ge(half);
-                let near = below.select(right.select(d11, d10), right.select(d01, d00));
-                // Depths are never NaN, so the fast (NaN-unaware) min and max are exact.
-                let lo = d00.fast_min(d01).fast_min(d10.fast_min(d11));
-                let hi = d00.fast_max(d01).fast_max(d10.fast_max(d11));
-                let top = d00 + (d01 - d00) * fu;
-                let bottom = d10 + (d11 - d10) * fu;
-                let bilinear = top + (bottom - top) * fv;
-                let sample = (lo.simd_gt(zero) & (hi - lo).simd_lt(agree)).select(bilinear, near);
+                let (sample, nearest) = if NEAREST {
+                    // Clamped, u + ½ < width and v + ½ < height: the nearest pixel is in the
+                    // image.
+                    let nearest_f = floor_small(v + half) * splat(w as f32) + floor_small(u + half);
+                    let nearest = nearest_f.fast_trunc_int().to_array();
+                    let mut d = [0.0f32; N];
+                    for x in 0..N {
+                        d[x] = depth[nearest[x] as usize];
+                    }
+                    (simd.f32s(d), nearest)
+                } else {
+                    let (fu, fv) = (u - floor_small(u), v - floor_small(v));
+                    // Index of the top-left pixel of the 2×2 neighbourhood, computed in f32
+                    // (exact: image sizes stay far below 2^24 pixels) and clamped so that every
+                    // lane's neighbourhood lies in the image.
+                    let quad_f = ((v - fv) * splat(w as f32) + (u - fu)).fast_min(last_quad);
+                    let quad = quad_f.fast_trunc_int().to_array();
+                    // Pixel loads (a gather: one voxel at a time).
+                    let (mut d00, mut d01, mut d10, mut d11) =
+                        ([0.0f32; N], [0.0; N], [0.0; N], [0.0; N]);
+                    for x in 0..N {
+                        let q = quad[x] as usize;
+                        let p = &depth[q..q + w + 2];
+                        (d00[x], d01[x], d10[x], d11[x]) = (p[0], p[1], p[w], p[w + 1]);
+                    }
+                    let (d00, d01, d10, d11) = (
+                        simd.f32s(d00),
+                        simd.f32s(d01),
+                        simd.f32s(d10),
+                        simd.f32s(d11),
+                    );
+                    let right = fu.simd_ge(half);
+                    let below = fv.simd_ge(half);
+                    let near = below.select(right.select(d11, d10), right.select(d01, d00));
+                    // Depths are never NaN, so the fast (NaN-unaware) min and max are exact.
+                    let lo = d00.fast_min(d01).fast_min(d10.fast_min(d11));
+                    let hi = d00.fast_max(d01).fast_max(d10.fast_max(d11));
+                    let top = d00 + (d01 - d00) * fu;
+                    let bottom = d10 + (d11 - d10) * fu;
+                    let bilinear = top + (bottom - top) * fv;
+                    let agreeing = lo.simd_gt(zero) & (hi - lo).simd_lt(agree);
+                    // The pixel nearest to each projection: its neighbourhood's corner on the
+                    // projection's side.
+                    let nearest =
+                        (quad_f + right.select(one, zero) + below.select(splat(w as f32), zero))
+                            .fast_trunc_int()
+                            .to_array();
+                    (agreeing.select(bilinear, near), nearest)
+                };
                 let sdf = sample - zc;
                 let observed = inside
                     & sample.simd_ge(min_depth)
@@ -792,12 +842,6 @@ impl Kernel {
                 // a share of 0 and keep their colour.
                 let b16 = floor_small(share * splat(65536.0) + half).fast_min(splat(65536.0));
                 let a16 = splat(65536.0) - b16;
-                // The pixel nearest to each projection (its 2×2 neighbourhood's corner on the
-                // projection's side).
-                let nearest =
-                    (quad_f + right.select(one, zero) + below.select(splat(w as f32), zero))
-                        .fast_trunc_int()
-                        .to_array();
                 let row_color: &mut [[u8; 4]; N] = (&mut color[base..base + N])
                     .try_into()
                     .expect("a block row holds eight voxels");
@@ -830,7 +874,7 @@ mod tests {
     use super::*;
     use crate::geometry::look_at;
     use crate::image::{DepthImage, RgbImage};
-    use crate::tsdf::{Roi, TsdfConfig};
+    use crate::tsdf::{BLOCK_VOXELS, Roi, TsdfConfig};
 
     fn touched(
         volume: &TsdfVolume,
@@ -1042,55 +1086,141 @@ mod tests {
     /// every block bit for bit alike, over two frames from different views.
     #[test]
     fn the_voxel_update_is_the_same_in_every_lane_implementation() {
-        let camera = PinholeCamera::from_hfov(80, 60, 70.0).unwrap();
-        let config = TsdfConfig {
-            voxel_size_m: 0.02,
-            ..TsdfConfig::default()
-        };
+        let camera = scattered_camera();
+        let (coords, views) = scattered_views();
+        for depth_sample in [DepthSample::Bilinear, DepthSample::Nearest] {
+            let config = TsdfConfig {
+                voxel_size_m: 0.02,
+                depth_sample,
+                ..TsdfConfig::default()
+            };
+            let mut portable: Vec<Block> = coords.iter().map(|_| Block::new()).collect();
+            let mut fast = portable.clone();
+            for (pose, frame) in &views {
+                let kernel = Kernel::new(&config, &camera, pose);
+                let depth = frame.depth_m.as_slice();
+                let rgbx: Vec<u32> = frame.rgb.as_slice().iter().map(rgbx_word).collect();
+                for ((a, b), coord) in portable.iter_mut().zip(&mut fast).zip(&coords) {
+                    kernel.update_block_portable(a, coord, depth, &rgbx);
+                    kernel.update_block(b, coord, depth, &rgbx);
+                }
+            }
+            let observed: usize = portable
+                .iter()
+                .map(|b| b.weight.iter().filter(|&&w| w > 0.0).count())
+                .sum();
+            assert!(
+                observed > 10_000,
+                "{depth_sample:?}: only {observed} voxels observed"
+            );
+            for (a, b) in portable.iter().zip(&fast) {
+                let bits = |x: &[f32; BLOCK_VOXELS]| x.map(f32::to_bits);
+                assert_eq!(bits(&a.tsdf), bits(&b.tsdf), "{depth_sample:?}");
+                assert_eq!(bits(&a.weight), bits(&b.weight), "{depth_sample:?}");
+                assert_eq!(a.color, b.color, "{depth_sample:?}");
+            }
+        }
+    }
+
+    /// The camera of [`scattered_views`].
+    fn scattered_camera() -> PinholeCamera {
+        PinholeCamera::from_hfov(80, 60, 70.0).unwrap()
+    }
+
+    /// Every block of a 6-block cube around the origin (at 2 cm voxels: in front of, inside and
+    /// behind the scattered surfaces), and two views of scattered depth towards the origin.
+    fn scattered_views() -> (Vec<BlockCoord>, Vec<(Isometry3<f64>, RgbdFrame)>) {
+        let coords = (-3..3)
+            .flat_map(|x| (-3..3).flat_map(move |y| (-3..3).map(move |z| [x, y, z])))
+            .collect();
         let target = Point3::origin();
         let views = [
             (Point3::new(1.2, -0.4, 0.5), 11),
             (Point3::new(-0.3, 1.0, 0.9), 12),
-        ];
-        // Every block of a 6-block cube around the target: in front of, inside and behind the
-        // scattered surfaces.
-        let coords: Vec<BlockCoord> = (-3..3)
-            .flat_map(|x| (-3..3).flat_map(move |y| (-3..3).map(move |z| [x, y, z])))
-            .collect();
-        let mut portable: Vec<Block> = coords.iter().map(|_| Block::new()).collect();
-        let mut fast = portable.clone();
-        for (eye, seed) in views {
+        ]
+        .map(|(eye, seed)| {
             let pose = look_at(&eye, &target, &Vector3::z()).unwrap();
-            let range = (target - eye).norm();
-            let frame = scattered_frame(seed, range, 0.9..1.1);
-            let kernel = Kernel::new(&config, &camera, &pose);
-            let depth = frame.depth_m.as_slice();
-            let rgbx: Vec<u32> = frame.rgb.as_slice().iter().map(rgbx_word).collect();
-            for ((a, b), coord) in portable.iter_mut().zip(&mut fast).zip(&coords) {
-                kernel.update_block_with(Portable, a, coord, depth, &rgbx);
-                kernel.update_block(b, coord, depth, &rgbx);
+            (pose, scattered_frame(seed, (target - eye).norm(), 0.9..1.1))
+        });
+        (coords, views.into())
+    }
+
+    #[test]
+    fn the_nearest_sample_reads_the_pixel_nearest_each_voxel() {
+        // One view into empty blocks: every voxel's TSDF, weight and colour must be what the
+        // pixel nearest its projection says, computed here in f64, voxel by voxel.
+        let camera = scattered_camera();
+        let (coords, views) = scattered_views();
+        let (pose, frame) = &views[0];
+        let config = TsdfConfig {
+            voxel_size_m: 0.02,
+            depth_sample: DepthSample::Nearest,
+            ..TsdfConfig::default()
+        };
+        let kernel = Kernel::new(&config, &camera, pose);
+        let rgbx: Vec<u32> = frame.rgb.as_slice().iter().map(rgbx_word).collect();
+        let camera_from_world = pose.inverse();
+        let truncation = f64::from(config.truncation_m());
+        let (mut checked, mut observed) = (0, 0);
+        for coord in &coords {
+            let mut block = Block::new();
+            kernel.update_block(&mut block, coord, frame.depth_m.as_slice(), &rgbx);
+            for i in 0..BLOCK_VOXELS {
+                let local = [i % 8, (i / 8) % 8, i / 64];
+                let centre = Point3::from(Vector3::from_fn(|a, _| {
+                    f64::from(coord[a] * 8 + local[a] as i32) * f64::from(config.voxel_size_m)
+                }));
+                let p = camera_from_world * centre;
+                let (u, v) = (
+                    camera.fx * p.x / p.z + camera.cx,
+                    camera.fy * p.y / p.z + camera.cy,
+                );
+                let (wf, hf) = (f64::from(camera.width), f64::from(camera.height));
+                // Leave out voxels within rounding of a decision: a pixel border, the image's
+                // edge, or the truncation band's far side.
+                let near_edge = |x: f64| (x + 0.5 - (x + 0.5).round()).abs() < 1e-3;
+                if p.z < 0.2 || near_edge(u) || near_edge(v) {
+                    continue;
+                }
+                if !(-0.5..wf - 0.5).contains(&u) || !(-0.5..hf - 0.5).contains(&v) {
+                    assert_eq!(
+                        block.weight[i], 0.0,
+                        "voxel {i} of {coord:?} projects outside"
+                    );
+                    continue;
+                }
+                let pixel =
+                    (v + 0.5).floor() as usize * camera.width as usize + (u + 0.5).floor() as usize;
+                let d = f64::from(frame.depth_m.as_slice()[pixel]);
+                let sdf = d - p.z;
+                if (sdf + truncation).abs() < 1e-4 {
+                    continue;
+                }
+                checked += 1;
+                if d < f64::from(config.min_depth_m) || sdf < -truncation {
+                    assert_eq!(
+                        block.weight[i], 0.0,
+                        "voxel {i} of {coord:?}: d {d}, sdf {sdf}"
+                    );
+                    continue;
+                }
+                observed += 1;
+                let expected = (sdf / truncation).min(1.0);
+                assert!(
+                    (f64::from(block.tsdf[i]) - expected).abs() < 1e-4,
+                    "voxel {i} of {coord:?}: TSDF {} against {expected}",
+                    block.tsdf[i]
+                );
+                let weight = 1.0 / (p.z * p.z);
+                assert!((f64::from(block.weight[i]) / weight - 1.0).abs() < 1e-4);
+                let [r, g, b] = frame.rgb.as_slice()[pixel];
+                assert_eq!(block.color[i], [r, g, b, 1], "voxel {i} of {coord:?}");
             }
         }
-        let observed: usize = portable
-            .iter()
-            .map(|b| b.weight.iter().filter(|&&w| w > 0.0).count())
-            .sum();
-        assert!(observed > 10_000, "only {observed} voxels observed");
-        for (a, b) in portable.iter().zip(&fast) {
-            assert!(
-                a.tsdf
-                    .iter()
-                    .zip(b.tsdf.iter())
-                    .all(|(x, y)| x.to_bits() == y.to_bits())
-            );
-            assert!(
-                a.weight
-                    .iter()
-                    .zip(b.weight.iter())
-                    .all(|(x, y)| x.to_bits() == y.to_bits())
-            );
-            assert_eq!(a.color, b.color);
-        }
+        assert!(
+            checked > 50_000 && observed > 5_000,
+            "{checked} checked, {observed} observed"
+        );
     }
 
     #[test]

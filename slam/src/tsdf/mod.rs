@@ -125,6 +125,24 @@ pub struct TsdfConfig {
     /// allocates blocks on its own; only noisier (farther) pixels need the support of
     /// `min_block_support` pixels. Default none (unknown: every pixel needs that support).
     pub depth_sigma_at_1m_m: Option<f32>,
+    /// How a voxel reads its depth from the image. Default [`DepthSample::Bilinear`].
+    pub depth_sample: DepthSample,
+}
+
+/// How the integration reads the depth at a voxel's sub-pixel projection.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum DepthSample {
+    /// Bilinear between the four pixels around the projection when all four are measured and
+    /// agree within half the truncation distance, otherwise the nearest of them. Voxels between
+    /// pixel centres get a depth between the two measurements instead of a step, so a surface
+    /// seen obliquely fuses without half-pixel terraces.
+    #[default]
+    Bilinear,
+    /// The pixel nearest the projection, as KinectFusion and Open3D read depth: one load in
+    /// place of four and no interpolation, about 30% less work per voxel. Each frame's
+    /// contribution is then a half-pixel staircase, which averaging over many views smooths.
+    Nearest,
 }
 
 impl Default for TsdfConfig {
@@ -138,6 +156,7 @@ impl Default for TsdfConfig {
             roi: None,
             min_block_support: 1,
             depth_sigma_at_1m_m: None,
+            depth_sample: DepthSample::Bilinear,
         }
     }
 }
