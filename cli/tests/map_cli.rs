@@ -22,28 +22,16 @@ fn map_and_evaluate_default_orbit() {
     ]);
     let [x, y, z] = first_rock_centroid_m(dir.path());
     let roi = format!("cyl:{x},{y},{},{},1.2", z - 1.6, z + 1.2);
-    scarp(&[
-        "map",
-        &d("seq"),
-        "--poses",
-        "groundtruth",
-        "--voxel",
-        "0.01",
-        "--roi",
-        &roi,
-        "--out",
-        &d("roi"),
-    ]);
-    scarp(&[
-        "map",
-        &d("seq"),
-        "--poses",
-        "groundtruth",
-        "--voxel",
-        "0.01",
-        "--out",
-        &d("full"),
-    ]);
+    // `scarp map` of the sequence into `out`, with ground-truth poses at 1 cm.
+    let map = |out: &str, extra: &[&str]| {
+        let (seq, out) = (d("seq"), d(out));
+        let mut args = vec!["map", &seq, "--poses", "groundtruth", "--voxel", "0.01"];
+        args.extend_from_slice(extra);
+        args.extend(["--out", &out]);
+        scarp(&args);
+    };
+    map("roi", &["--roi", &roi]);
+    map("full", &[]);
     let roi_map = json(&dir.path().join("roi/map.json"));
     let full_map = json(&dir.path().join("full/map.json"));
     for key in [
@@ -110,20 +98,7 @@ fn map_and_evaluate_default_orbit() {
     assert!(visible > 0.5 && visible < 1.0, "visible fraction {visible}");
 
     // The nearest pixel's depth: another mesh, as accurate.
-    scarp(&[
-        "map",
-        &d("seq"),
-        "--poses",
-        "groundtruth",
-        "--voxel",
-        "0.01",
-        "--roi",
-        &roi,
-        "--depth-sample",
-        "nearest",
-        "--out",
-        &d("nearest"),
-    ]);
+    map("nearest", &["--roi", &roi, "--depth-sample", "nearest"]);
     let read = |mesh: &str| std::fs::read(dir.path().join(mesh)).expect("mesh");
     assert_ne!(read("nearest/mesh.ply"), read("roi/mesh.ply"));
     let f_nearest = score("nearest/mesh.ply")["fscore"].as_f64().unwrap();
