@@ -73,10 +73,14 @@ fn bench(c: &mut Criterion) {
                 ..TsdfConfig::default()
             };
             // Warm volume (all frames fused once), then time one more frame.
-            let mut volume = TsdfVolume::new(config).expect("config");
-            for (f, p) in frames.iter().zip(&poses) {
-                volume.integrate(f, &camera, p).expect("integrate");
-            }
+            let warm = |config: TsdfConfig| {
+                let mut volume = TsdfVolume::new(config).expect("config");
+                for (f, p) in frames.iter().zip(&poses) {
+                    volume.integrate(f, &camera, p).expect("integrate");
+                }
+                volume
+            };
+            let mut volume = warm(config);
             let mut k = 0;
             group.bench_function(
                 format!("integrate 640x480 frame, 1 cm, {region}, {noise}"),
@@ -90,14 +94,10 @@ fn bench(c: &mut Criterion) {
                 },
             );
             if roi.is_some() && noise == "noisy" {
-                let mut nearest = TsdfVolume::new(TsdfConfig {
+                let mut nearest = warm(TsdfConfig {
                     depth_sample: DepthSample::Nearest,
                     ..volume.config().clone()
-                })
-                .expect("config");
-                for (f, p) in frames.iter().zip(&poses) {
-                    nearest.integrate(f, &camera, p).expect("integrate");
-                }
+                });
                 group.bench_function(
                     format!("integrate 640x480 frame, 1 cm, {region}, {noise}, nearest pixel"),
                     |b| {

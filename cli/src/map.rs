@@ -98,8 +98,9 @@ pub struct MapArgs {
     #[arg(long)]
     pub min_block_support: Option<u32>,
     /// How a voxel reads the depth at its projection: `bilinear` between the four pixels around
-    /// it where they agree (the default), or the `nearest` pixel, as Open3D does (about 30% less
-    /// integration work; each view then fuses as a half-pixel staircase).
+    /// it where they agree (the default), or the `nearest` pixel, as Open3D does (one load per voxel
+    /// instead of four: integration took 17–22% less time on session 60's sequences; each view
+    /// then fuses as a half-pixel staircase).
     #[arg(long, value_enum, default_value = "bilinear")]
     pub depth_sample: DepthSampleArg,
     /// The depth sensor's σ at 1 m, metres (σ grows as z²): pixels whose σ is within the

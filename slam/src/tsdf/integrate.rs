@@ -1171,10 +1171,10 @@ mod tests {
                     f64::from(coord[a] * 8 + local[a] as i32) * f64::from(config.voxel_size_m)
                 }));
                 let p = camera_from_world * centre;
-                let (u, v) = (
-                    camera.fx * p.x / p.z + camera.cx,
-                    camera.fy * p.y / p.z + camera.cy,
-                );
+                let Some(projection) = camera.project(&p) else {
+                    continue;
+                };
+                let (u, v) = (projection.x, projection.y);
                 let (wf, hf) = (f64::from(camera.width), f64::from(camera.height));
                 // Leave out voxels within rounding of a decision: a pixel border, the image's
                 // edge, or the truncation band's far side.

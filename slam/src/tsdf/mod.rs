@@ -140,7 +140,7 @@ pub enum DepthSample {
     #[default]
     Bilinear,
     /// The pixel nearest the projection, as KinectFusion and Open3D read depth: one load in
-    /// place of four and no interpolation, about 30% less work per voxel. Each frame's
+    /// place of four and no interpolation: the voxel update runs about 30% fewer instructions. Each frame's
     /// contribution is then a half-pixel staircase, which averaging over many views smooths.
     Nearest,
 }
