@@ -933,6 +933,15 @@ mod tests {
         counts.into_iter().collect()
     }
 
+    /// The pose of a camera at `eye` looking at `target` (world z up) and the distance between
+    /// them; `None` for a degenerate view.
+    fn view(eye: (f64, f64, f64), target: (f64, f64, f64)) -> Option<(Isometry3<f64>, f64)> {
+        let eye = Point3::new(eye.0, eye.1, eye.2);
+        let target = Point3::new(target.0, target.1, target.2);
+        let pose = look_at(&eye, &target, &Vector3::z()).ok()?;
+        Some((pose, (target - eye).norm()))
+    }
+
     /// An 80 × 60 frame whose depths are drawn uniformly from `range_m` times `spread` (5% of
     /// them missing) and whose colours are random, from `seed`.
     fn scattered_frame(seed: u64, range_m: f64, spread: std::ops::Range<f64>) -> RgbdFrame {
@@ -1053,13 +1062,10 @@ mod tests {
             radius_m in 0.05f64..1.0,
             seed in any::<u64>(),
         ) {
-            let eye = Point3::new(eye.0, eye.1, eye.2);
-            let target = Point3::new(target.0, target.1, target.2);
-            let range = (target - eye).norm();
-            prop_assume!(range > 0.2);
-            let Ok(pose) = look_at(&eye, &target, &Vector3::z()) else {
+            let Some((pose, range)) = view(eye, target) else {
                 return Ok(());
             };
+            prop_assume!(range > 0.2);
             let camera = PinholeCamera::from_hfov(80, 60, 70.0).unwrap();
             // Depths scattered around the target's range, so that many bands cross the region
             // and many miss it.
@@ -1079,6 +1085,58 @@ mod tests {
             let every_pixel = touched(&volume, &frame, &camera, &pose, &PixelWindow::full(&camera));
             prop_assert_eq!(&every_pixel, &touched_by_brute_force(&volume, &frame, &camera, &pose));
             prop_assert_eq!(touched(&volume, &frame, &camera, &pose, &window), every_pixel);
+        }
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(48))]
+
+        /// On a smooth surface, where long runs of pixels put their bands on the same blocks and
+        /// the cache of recent blocks counts most of them, the blocks found and their counts are
+        /// those of the brute force, with and without a region.
+        #[test]
+        fn a_smooth_surface_finds_what_the_brute_force_finds(
+            eye in (-2.5f64..2.5, -2.5f64..2.5, -1.0f64..2.5),
+            target in (-1.5f64..1.5, -1.5f64..1.5, -0.5f64..0.5),
+            slope in (-0.01f64..0.01, -0.01f64..0.01),
+            voxel_size_m in prop_oneof![Just(0.01f32), Just(0.02f32)],
+            with_roi in any::<bool>(),
+        ) {
+            let Some((pose, range)) = view(eye, target) else {
+                return Ok(());
+            };
+            prop_assume!(range > 0.3);
+            let camera = PinholeCamera::from_hfov(80, 60, 70.0).unwrap();
+            // A tilted plane, with a hole every 37th pixel to break runs.
+            let depth: Vec<f32> = (0..80 * 60)
+                .map(|i| {
+                    let (u, v) = (f64::from(i % 80), f64::from(i / 80));
+                    let d = range + slope.0 * u + slope.1 * v;
+                    if i % 37 == 0 { 0.0 } else { d as f32 }
+                })
+                .collect();
+            let frame = RgbdFrame::new(
+                0.0,
+                RgbImage::filled(80, 60, [0, 0, 0]),
+                DepthImage::from_vec(80, 60, depth).unwrap(),
+                None,
+            )
+            .unwrap();
+            let roi = Roi::Cylinder {
+                center_xy: [target.0, target.1],
+                z_min: target.2 - 0.3,
+                z_max: target.2 + 0.3,
+                radius_m: 0.4,
+            };
+            let volume = TsdfVolume::new(TsdfConfig {
+                voxel_size_m,
+                roi: with_roi.then_some(roi),
+                ..TsdfConfig::default()
+            })
+            .unwrap();
+            let found = touched(&volume, &frame, &camera, &pose, &PixelWindow::full(&camera));
+            prop_assert!(!found.is_empty() || with_roi);
+            prop_assert_eq!(found, touched_by_brute_force(&volume, &frame, &camera, &pose));
         }
     }
 
