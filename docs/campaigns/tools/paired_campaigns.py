@@ -6,16 +6,24 @@
 import json, sys, glob, os, statistics as st
 a, b = sys.argv[1], sys.argv[2]
 rows = []
+def num(x, fmt):
+    return '-' if x is None else fmt % x
+def interval(t):
+    """(width, truth inside) of a target's alpha_min interval, or None without one."""
+    lo, hi, g = t.get('alpha_min_low_deg'), t.get('alpha_min_high_deg'), t.get('alpha_min_gt_deg')
+    if lo is None or hi is None or g is None:
+        return None
+    return hi - lo, lo <= g <= hi
 for run in sorted(glob.glob(a + '/runs/*/seed-*/mission.json')):
     rel = os.path.relpath(run, a)
     other = os.path.join(b, rel)
     if not os.path.exists(other):
         continue
     ma, mb = json.load(open(run)), json.load(open(other))
-    print(rel.split('/mission.json')[0], 'wall %.0f/%.0f map %.0f/%.0f ba %.0f/%.0f coll %s/%s clr %.2f/%.2f' % (
+    print(rel.split('/mission.json')[0], 'wall %.0f/%.0f map %.0f/%.0f ba %.0f/%.0f coll %s/%s clr %s/%s' % (
         ma['wall_time_s'], mb['wall_time_s'], ma['timings']['map_s'], mb['timings']['map_s'],
         ma['timings']['ba_mesh_s'], mb['timings']['ba_mesh_s'], ma['collisions'], mb['collisions'],
-        ma['min_clearance_m'] or -1, mb['min_clearance_m'] or -1))
+        num(ma['min_clearance_m'], '%.2f'), num(mb['min_clearance_m'], '%.2f')))
     ta = {t['gt_rock_id']: t for t in ma['targets'] if t.get('gt_role') == 'target'}
     tb = {t['gt_rock_id']: t for t in mb['targets'] if t.get('gt_role') == 'target'}
     for rid in sorted(set(ta) | set(tb)):
@@ -23,21 +31,20 @@ for run in sorted(glob.glob(a + '/runs/*/seed-*/mission.json')):
         rows.append((x, y))
         def f(t):
             e = t.get('alpha_error_deg')
-            lo, hi, g = t.get('alpha_min_low_deg'), t.get('alpha_min_high_deg'), t.get('alpha_min_gt_deg')
-            inside = '' if e is None or lo is None else ('in' if lo <= g <= hi else 'OUT')
+            iv = interval(t) if e is not None else None
             return '%-10s a %6s w %5s %3s F1 %5s F2 %5s loc %4s' % (
-                t.get('status', 'absent'), '%+.2f' % e if e is not None else '-',
-                '%.2f' % (hi - lo) if lo is not None and hi is not None else '-', inside,
-                '%.3f' % t['fscore_1cm'] if t.get('fscore_1cm') else '-',
-                '%.3f' % t['fscore_2cm'] if t.get('fscore_2cm') else '-',
-                '%.2f' % t['localization_error_estimate_frame_m'] if t.get('localization_error_estimate_frame_m') is not None else '-')
+                t.get('status', 'absent'), num(e, '%+.2f'),
+                num(iv and iv[0], '%.2f'), '' if iv is None else ('in' if iv[1] else 'OUT'),
+                num(t.get('fscore_1cm'), '%.3f'), num(t.get('fscore_2cm'), '%.3f'),
+                num(t.get('localization_error_estimate_frame_m'), '%.2f'))
         print('  rock', rid, '|', f(x), '|', f(y))
 def tot(i):
     ts = [r[i] for r in rows]
     al = [t for t in ts if t.get('alpha_error_deg') is not None]
     ok = sum(abs(t['alpha_error_deg']) <= 2 for t in al)
-    inside = sum(t['alpha_min_low_deg'] <= t['alpha_min_gt_deg'] <= t['alpha_min_high_deg'] for t in al)
-    w = [t['alpha_min_high_deg'] - t['alpha_min_low_deg'] for t in al]
+    ivs = [iv for iv in map(interval, al) if iv is not None]
+    inside = sum(held for _, held in ivs)
+    w = [width for width, _ in ivs]
     f1 = [t['fscore_1cm'] for t in ts if t.get('fscore_1cm')]
     f2 = [t['fscore_2cm'] for t in ts if t.get('fscore_2cm')]
     return '%d targets, %d analysed, |aerr|<=2: %d, inside: %d, median width %.2f, mean F1 %.4f min %.4f, mean F2 %.4f min %.4f' % (

@@ -1086,10 +1086,6 @@ mod tests {
             prop_assert_eq!(&every_pixel, &touched_by_brute_force(&volume, &frame, &camera, &pose));
             prop_assert_eq!(touched(&volume, &frame, &camera, &pose, &window), every_pixel);
         }
-    }
-
-    proptest! {
-        #![proptest_config(ProptestConfig::with_cases(48))]
 
         /// On a smooth surface, where long runs of pixels put their bands on the same blocks and
         /// the cache of recent blocks counts most of them, the blocks found and their counts are
