@@ -40,6 +40,17 @@ pub struct ClearanceConfig {
     /// Largest number of waypoints inserted to pull a trajectory back to its (clear) path.
     /// Default 16.
     pub max_inserted_waypoints: usize,
+    /// The least clearance (m) a plan may start at. A plan from a start nearer than
+    /// `min_clearance_m`, where the vehicle already is, is checked at the start's own clearance
+    /// (less 5 cm) until it first reaches `min_clearance_m`, then at `min_clearance_m`: it may
+    /// leave without coming nearer, but not come back. Below this floor it is refused. Default
+    /// 0.5, the campaign's bound on the true clearance.
+    ///
+    /// Why: the state estimate walks while the vehicle flies, moving the rocks in the frame it
+    /// flies in, so a flight planned 1.5 m from a rock can end 1.42 m from it, and every way
+    /// out was refused (library-b seed 66, session 60: the mission ended with a planning error
+    /// beside the block it had mapped). Staying put is no safer than climbing away.
+    pub min_start_clearance_m: f64,
 }
 
 impl Default for ClearanceConfig {
@@ -51,6 +62,7 @@ impl Default for ClearanceConfig {
             repair_step_m: 0.5,
             max_raise_m: 10.0,
             max_inserted_waypoints: 16,
+            min_start_clearance_m: 0.5,
         }
     }
 }
@@ -69,6 +81,12 @@ impl ClearanceConfig {
         )?;
         check_positive("clearance.repair_step_m", self.repair_step_m)?;
         crate::error::check_range("clearance.max_raise_m", self.max_raise_m, 0.0, 1e4)?;
+        crate::error::check_range(
+            "clearance.min_start_clearance_m",
+            self.min_start_clearance_m,
+            0.0,
+            1e4,
+        )?;
         Ok(())
     }
 }
@@ -107,10 +125,17 @@ pub struct ClearanceReport {
     pub required_m: f64,
     /// Smallest clearance found; `None` if the environment is empty.
     pub min_clearance_m: Option<f64>,
-    /// Where the smallest clearance was found (world ENU, m).
+    /// The worst point (world ENU, m): the one with the least clearance over the requirement
+    /// in force there. That is where the smallest clearance was found, but along a plan that
+    /// leaves a start inside `required_m` (see [`ClearanceConfig::min_start_clearance_m`]).
     pub worst_position_m: Option<Point3<f64>>,
     /// What was closest there.
     pub worst_source: Option<ClearanceSource>,
+    /// The clearance at the worst point (m); `None` if the environment is empty.
+    pub worst_clearance_m: Option<f64>,
+    /// The requirement in force at the worst point (m): `required_m`, or the start's own
+    /// clearance less 5 cm along a plan leaving a start inside `required_m`.
+    pub worst_required_m: f64,
     /// Where along the input the worst point lies: time (s) for trajectories, arc length (m)
     /// for paths.
     pub worst_at: f64,
@@ -118,8 +143,55 @@ pub struct ClearanceReport {
     pub worst_segment: usize,
     /// Number of points checked.
     pub samples: usize,
-    /// Number of points closer than `required_m`.
+    /// Number of points closer than the requirement in force there.
     pub violations: usize,
+}
+
+/// How far below the start's own clearance a plan leaving it may dip (m): the trajectory's
+/// samples and the meshes' f32 distances round by millimetres, and a climb beside a rock's
+/// face changes its distance by the face's tilt.
+const START_CLEARANCE_TOLERANCE_M: f64 = 0.05;
+
+/// The clearance a checked sequence of points must keep, sample by sample, in order along it.
+#[derive(Debug, Clone, Copy)]
+struct Requirement {
+    required_m: f64,
+    /// While the sequence has not yet reached `required_m`: what it must keep meanwhile.
+    leaving_m: Option<f64>,
+}
+
+impl Requirement {
+    /// `cfg.min_clearance_m` at every sample.
+    fn everywhere(cfg: &ClearanceConfig) -> Self {
+        Self {
+            required_m: cfg.min_clearance_m,
+            leaving_m: None,
+        }
+    }
+
+    /// The requirement for a plan starting where the vehicle is, at clearance `start` (see
+    /// [`ClearanceConfig::min_start_clearance_m`]).
+    fn from_start(start: Option<ClearanceSample>, cfg: &ClearanceConfig) -> Self {
+        let leaving_m = start
+            .map(|s| s.clearance_m - START_CLEARANCE_TOLERANCE_M)
+            .filter(|&m| m < cfg.min_clearance_m && m >= cfg.min_start_clearance_m);
+        Self {
+            required_m: cfg.min_clearance_m,
+            leaving_m,
+        }
+    }
+
+    /// The requirement at the next sample, whose clearance is `clearance_m`; once a sample
+    /// reaches `required_m`, every later one is held to it.
+    fn next(&mut self, clearance_m: f64) -> f64 {
+        match self.leaving_m {
+            Some(leaving_m) if clearance_m < self.required_m => leaving_m,
+            _ => {
+                self.leaving_m = None;
+                self.required_m
+            }
+        }
+    }
 }
 
 impl ClearanceReport {
@@ -129,6 +201,8 @@ impl ClearanceReport {
             min_clearance_m: None,
             worst_position_m: None,
             worst_source: None,
+            worst_clearance_m: None,
+            worst_required_m: required_m,
             worst_at: 0.0,
             worst_segment: 0,
             samples: 0,
@@ -136,14 +210,31 @@ impl ClearanceReport {
         }
     }
 
-    fn add(&mut self, p: &Point3<f64>, sample: Option<ClearanceSample>, at: f64, segment: usize) {
+    /// Adds the sample at `p`, held to `requirement`'s next requirement.
+    fn add(
+        &mut self,
+        p: &Point3<f64>,
+        sample: Option<ClearanceSample>,
+        requirement: &mut Requirement,
+        at: f64,
+        segment: usize,
+    ) {
         self.samples += 1;
         let Some(s) = sample else { return };
-        if s.clearance_m < self.required_m {
+        let required_m = requirement.next(s.clearance_m);
+        if s.clearance_m < required_m {
             self.violations += 1;
         }
         if self.min_clearance_m.is_none_or(|m| s.clearance_m < m) {
             self.min_clearance_m = Some(s.clearance_m);
+        }
+        let margin_m = s.clearance_m - required_m;
+        if self
+            .worst_clearance_m
+            .is_none_or(|worst_m| margin_m < worst_m - self.worst_required_m)
+        {
+            self.worst_clearance_m = Some(s.clearance_m);
+            self.worst_required_m = required_m;
             self.worst_position_m = Some(*p);
             self.worst_source = Some(s.source);
             self.worst_at = at;
@@ -160,8 +251,8 @@ impl ClearanceReport {
     pub fn to_error(&self, reason: impl Into<String>) -> PlanError {
         let p = self.worst_position_m.unwrap_or_else(Point3::origin);
         PlanError::Clearance {
-            clearance_m: self.min_clearance_m.unwrap_or(f64::INFINITY),
-            required_m: self.required_m,
+            clearance_m: self.worst_clearance_m.unwrap_or(f64::INFINITY),
+            required_m: self.worst_required_m,
             x_m: p.x,
             y_m: p.y,
             z_m: p.z,
@@ -531,14 +622,35 @@ impl Environment {
     }
 
     /// Checks the straight segments between the waypoints of `path`, sampled every
-    /// `cfg.path_sample_spacing_m`.
+    /// `cfg.path_sample_spacing_m`, at `cfg.min_clearance_m` everywhere.
     pub fn check_path(&self, path: &Path, cfg: &ClearanceConfig) -> ClearanceReport {
+        self.check_path_held_to(path, cfg, Requirement::everywhere(cfg))
+    }
+
+    /// As [`Self::check_path`], for a path that starts where the vehicle is: from a start
+    /// inside `cfg.min_clearance_m` it may leave without coming nearer (see
+    /// [`ClearanceConfig::min_start_clearance_m`]).
+    pub fn check_path_from_start(&self, path: &Path, cfg: &ClearanceConfig) -> ClearanceReport {
+        let start = path
+            .waypoints
+            .first()
+            .and_then(|w| self.clearance_at(&w.position_m));
+        self.check_path_held_to(path, cfg, Requirement::from_start(start, cfg))
+    }
+
+    fn check_path_held_to(
+        &self,
+        path: &Path,
+        cfg: &ClearanceConfig,
+        mut requirement: Requirement,
+    ) -> ClearanceReport {
         let mut report = ClearanceReport::new(cfg.min_clearance_m);
         let mut arc = 0.0;
         if let Some(first) = path.waypoints.first() {
             report.add(
                 &first.position_m,
                 self.clearance_at(&first.position_m),
+                &mut requirement,
                 0.0,
                 0,
             );
@@ -550,18 +662,46 @@ impl Environment {
             for k in 1..=n {
                 let f = k as f64 / n as f64;
                 let p = w[0].position_m + d * f;
-                report.add(&p, self.clearance_at(&p), arc + f * len, seg);
+                report.add(
+                    &p,
+                    self.clearance_at(&p),
+                    &mut requirement,
+                    arc + f * len,
+                    seg,
+                );
             }
             arc += len;
         }
         report
     }
 
-    /// Checks `trajectory` sampled every `cfg.trajectory_sample_period_s` (and at its end).
+    /// Checks `trajectory` sampled every `cfg.trajectory_sample_period_s` (and at its end), at
+    /// `cfg.min_clearance_m` everywhere.
     pub fn check_trajectory(
         &self,
         trajectory: &Trajectory,
         cfg: &ClearanceConfig,
+    ) -> ClearanceReport {
+        self.check_trajectory_held_to(trajectory, cfg, Requirement::everywhere(cfg))
+    }
+
+    /// As [`Self::check_trajectory`], for a trajectory flown from where the vehicle is: from a
+    /// start inside `cfg.min_clearance_m` it may leave without coming nearer (see
+    /// [`ClearanceConfig::min_start_clearance_m`]).
+    pub fn check_trajectory_from_start(
+        &self,
+        trajectory: &Trajectory,
+        cfg: &ClearanceConfig,
+    ) -> ClearanceReport {
+        let start = self.clearance_at(&trajectory.sample(0.0).position_m);
+        self.check_trajectory_held_to(trajectory, cfg, Requirement::from_start(start, cfg))
+    }
+
+    fn check_trajectory_held_to(
+        &self,
+        trajectory: &Trajectory,
+        cfg: &ClearanceConfig,
+        mut requirement: Requirement,
     ) -> ClearanceReport {
         let mut report = ClearanceReport::new(cfg.min_clearance_m);
         let knots = trajectory.knot_times_s();
@@ -573,7 +713,7 @@ impl Environment {
                 .partition_point(|&x| x <= t)
                 .saturating_sub(1)
                 .min(knots.len().saturating_sub(2));
-            report.add(&p, self.clearance_at(&p), t, seg);
+            report.add(&p, self.clearance_at(&p), &mut requirement, t, seg);
         }
         report
     }
@@ -585,8 +725,9 @@ impl Environment {
         cfg: &ClearanceConfig,
     ) -> ClearanceReport {
         let mut report = ClearanceReport::new(cfg.min_clearance_m);
+        let mut requirement = Requirement::everywhere(cfg);
         for (i, p) in points.into_iter().enumerate() {
-            report.add(p, self.clearance_at(p), i as f64, i);
+            report.add(p, self.clearance_at(p), &mut requirement, i as f64, i);
         }
         report
     }
@@ -678,6 +819,9 @@ pub enum Repair {
 }
 
 /// Plans a min-snap trajectory along `path` and makes sure it keeps `cfg.min_clearance_m`.
+/// The path starts where the vehicle is: from a start already inside `cfg.min_clearance_m` (a
+/// rock the walking estimate moved nearer), it may leave without coming nearer, down to
+/// `cfg.min_start_clearance_m` (see [`Environment::check_path_from_start`]).
 ///
 /// The straight path must be clear (else the error says so: repair the path first). When the
 /// smooth trajectory cuts a corner too close, the violating segment is split at its midpoint
@@ -692,13 +836,13 @@ pub fn plan_clear_trajectory(
 ) -> Result<(Trajectory, ClearanceReport, Vec<Repair>), PlanError> {
     cfg.validate()?;
     path.validate()?;
-    env.check_path(path, cfg)
+    env.check_path_from_start(path, cfg)
         .ensure_clear("the straight path itself is too close; repair the path (raise it) first")?;
     let mut path = path.clone();
     let mut repairs = Vec::new();
     loop {
         let traj = plan_min_snap(&path, start, min_snap)?;
-        let report = env.check_trajectory(&traj, cfg);
+        let report = env.check_trajectory_from_start(&traj, cfg);
         if report.is_clear() {
             return Ok((traj, report, repairs));
         }
@@ -902,5 +1046,113 @@ mod tests {
             env.ensure_above_terrain(&Point3::new(f64::NAN, 0.0, 4.8), 0.5)
                 .is_err()
         );
+    }
+
+    /// A rock's bounding cylinder of radius 0.5 m at the origin, 2 m tall, and nothing else.
+    fn rock_at_origin() -> Environment {
+        let rock = Obstacle::Cylinder {
+            center_x_m: 0.0,
+            center_y_m: 0.0,
+            radius_m: 0.5,
+            z_bottom_m: 0.0,
+            z_top_m: 2.0,
+        };
+        Environment::new(None, &[rock]).unwrap()
+    }
+
+    /// Plans from rest along the straight path through `points` (world, m).
+    fn plan_through(
+        env: &Environment,
+        points: &[[f64; 3]],
+    ) -> Result<(Trajectory, ClearanceReport, Vec<Repair>), PlanError> {
+        let path = Path::new(
+            points
+                .iter()
+                .map(|&[x, y, z]| Waypoint::new(Point3::new(x, y, z), 0.0))
+                .collect(),
+        );
+        plan_clear_trajectory(
+            &path,
+            &StartState::default(),
+            &MinSnapConfig::default(),
+            env,
+            &ClearanceConfig::default(),
+        )
+    }
+
+    #[test]
+    fn a_plan_may_leave_a_start_inside_the_clearance_without_coming_nearer() {
+        // The vehicle is 1.42 m from the rock (its surface at x = 0.5), inside the 1.5 m the
+        // mission keeps: the estimate walked since the flight there was planned.
+        let env = rock_at_origin();
+        let x = 0.5 + 1.42;
+        let (up, report, _) = plan_through(&env, &[[x, 0.0, 1.0], [x, 0.0, 12.0]])
+            .expect("a climb straight up comes no nearer");
+        assert!(report.is_clear());
+        let held_to_all = env.check_trajectory(&up, &ClearanceConfig::default());
+        assert!(!held_to_all.is_clear(), "the case must start inside");
+        assert!((report.min_clearance_m.unwrap() - 1.42).abs() < 1e-6);
+        let (_, away, _) = plan_through(&env, &[[x, 0.0, 1.0], [x + 6.0, 0.0, 1.0]])
+            .expect("backing away comes no nearer");
+        assert!(away.is_clear());
+
+        // Towards the rock: refused, at the requirement in force there.
+        let Err(PlanError::Clearance {
+            clearance_m,
+            required_m,
+            ..
+        }) = plan_through(&env, &[[x, 0.0, 1.0], [x, 0.3, 1.0], [1.2, 0.3, 1.0]])
+        else {
+            panic!("a way in towards the rock must be refused");
+        };
+        assert!((required_m - 1.37).abs() < 1e-9, "{required_m}");
+        assert!(clearance_m < required_m, "{clearance_m} vs {required_m}");
+    }
+
+    #[test]
+    fn a_plan_that_left_the_start_is_held_to_the_whole_clearance() {
+        // Out to 3 m from the rock, then back past it at 1.45 m: more than the start had, but
+        // once out of the start's neighbourhood the plan keeps the mission's 1.5 m.
+        let env = rock_at_origin();
+        let x = 0.5 + 1.42;
+        let back = 0.5 + 1.45;
+        let err = plan_through(
+            &env,
+            &[
+                [x, 0.0, 1.0],
+                [3.5, 0.0, 1.0],
+                [3.5, 3.0, 1.0],
+                [0.0, back, 1.0],
+            ],
+        )
+        .unwrap_err();
+        let PlanError::Clearance {
+            clearance_m,
+            required_m,
+            y_m,
+            ..
+        } = err
+        else {
+            panic!("{err}");
+        };
+        assert_eq!(required_m, 1.5);
+        assert!(clearance_m < 1.5 && y_m > 1.0, "{clearance_m} at y {y_m}");
+    }
+
+    #[test]
+    fn a_start_below_the_floor_is_refused() {
+        // 0.4 m from the rock is below the 0.5 m floor: no plan starts there.
+        let env = rock_at_origin();
+        let x = 0.5 + 0.4;
+        let err = plan_through(&env, &[[x, 0.0, 1.0], [x, 0.0, 12.0]]).unwrap_err();
+        assert!(
+            matches!(err, PlanError::Clearance { required_m, .. } if required_m == 1.5),
+            "{err}"
+        );
+        let nan_floor = ClearanceConfig {
+            min_start_clearance_m: f64::NAN,
+            ..ClearanceConfig::default()
+        };
+        assert!(nan_floor.validate().is_err());
     }
 }

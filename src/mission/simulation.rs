@@ -1094,7 +1094,6 @@ impl<'a> Mission<'a> {
         // rock in that frame could start "1.1 m" from it, and the mission ended with a planning
         // error (library-a seeds 63 and 64, once the map cylinders were re-centred right).
         let env = self.env.with_obstacles_moved(&self.navigation_error_m());
-        let from_neck_ring = self.neck_ring == NeckRingStage::Flying;
         let vehicle = self.sensors.vehicle_mut();
         let mut result =
             vehicle.follow_from_rest(&with_path(exit(backoff_m)), &env, &config.planning);
@@ -1104,29 +1103,6 @@ impl<'a> Mission<'a> {
         {
             tracing::warn!("backing away from the rings: {e}; climbing straight up");
             result = vehicle.follow_from_rest(&with_path(exit(0.0)), &env, &config.planning);
-        }
-        // The neck ring's own exit climbed clear of every obstacle in the frame it was planned
-        // in. The estimate has walked since, moving the obstacles in the frame the vehicle
-        // flies in, so the climb may now end inside the mission's clearance (library-b seed 66,
-        // session 60: 1.42 m from the block it had circled, and the mission ended with a
-        // planning error). Climbing straight up from there comes no nearer than the vehicle
-        // already is, so it is planned at that clearance, never below the neck ring's own.
-        if let Err(e) = &result
-            && from_neck_ring
-            && let Some(clearance_m) = exit_clearance_m(
-                &env,
-                &here.position_m,
-                config.planning.clearance.min_clearance_m,
-                config.planning.mapping.neck_ring.min_clearance_m,
-            )
-        {
-            tracing::warn!(
-                "leaving the neck ring: {e}; climbing straight up at {clearance_m:.2} m of \
-                 clearance, what the vehicle has now"
-            );
-            let mut low = config.planning;
-            low.clearance.min_clearance_m = clearance_m;
-            result = vehicle.follow_from_rest(&with_path(exit(0.0)), &env, &low);
         }
         result?;
         timings.planning_s += clock.elapsed().as_secs_f64();
@@ -1230,44 +1206,5 @@ impl<'a> Mission<'a> {
             "true world_from_camera at every camera frame, ENU metres",
         )?;
         Ok(())
-    }
-}
-
-/// The clearance (m) at which to plan a climb straight up from `start_m` (world frame) when the
-/// mission's `required_m` cannot hold there: the start's own clearance in `env` less 5 cm of
-/// rounding, at most `required_m`; `None` where that is below `floor_m`, or for an empty `env`.
-fn exit_clearance_m(
-    env: &Environment,
-    start_m: &Point3<f64>,
-    required_m: f64,
-    floor_m: f64,
-) -> Option<f64> {
-    let here_m = env.clearance_at(start_m)?.clearance_m - 0.05;
-    (here_m >= floor_m).then_some(here_m.min(required_m))
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use scarp_planning::prelude::Obstacle;
-
-    #[test]
-    fn a_climb_out_of_the_neck_ring_keeps_what_clearance_the_vehicle_has() {
-        // A rock's bounding cylinder, 0.5 m in radius; the vehicle beside it.
-        let rock = Obstacle::Cylinder {
-            center_x_m: 0.0,
-            center_y_m: 0.0,
-            radius_m: 0.5,
-            z_bottom_m: 0.0,
-            z_top_m: 1.0,
-        };
-        let env = Environment::new(None, &[rock]).unwrap();
-        let at = |x: f64| exit_clearance_m(&env, &Point3::new(x, 0.0, 0.5), 1.5, 1.0);
-        assert_eq!(at(3.0), Some(1.5));
-        let inside = at(0.5 + 1.42).unwrap();
-        assert!((inside - 1.37).abs() < 1e-9, "{inside}");
-        assert_eq!(at(0.5 + 1.02), None);
-        let empty = Environment::new(None, &[]).unwrap();
-        assert_eq!(exit_clearance_m(&empty, &Point3::origin(), 1.5, 1.0), None);
     }
 }
