@@ -42,9 +42,10 @@ pub struct ClearanceConfig {
     pub max_inserted_waypoints: usize,
     /// The least clearance (m) a plan may start at. A plan from a start nearer than
     /// `min_clearance_m`, where the vehicle already is, is checked at the start's own clearance
-    /// (less 5 cm) until it first reaches `min_clearance_m`, then at `min_clearance_m`: it may
-    /// leave without coming nearer, but not come back. Below this floor it is refused. Default
-    /// 0.5, the campaign's bound on the true clearance.
+    /// less 5 cm until it first reaches `min_clearance_m`, then at `min_clearance_m`: it may
+    /// leave without coming nearer, but not come back. Where the start's clearance less 5 cm is
+    /// below this floor, the plan is held to `min_clearance_m` throughout, so it is refused.
+    /// Default 0.5, the campaign's bound on the true clearance.
     ///
     /// Why: the state estimate walks while the vehicle flies, moving the rocks in the frame it
     /// flies in, so a flight planned 1.5 m from a rock can end 1.42 m from it, and every way
