@@ -5,7 +5,7 @@ use serde::{Deserialize, Serialize};
 
 use super::LocalizationConfig;
 use super::gaussian::{Ellipsoid, Gaussian3};
-use super::triangulation::{BoxRay, nearest_point};
+use super::triangulation::{BoxRay, nearest_point, view_arc_deg};
 
 /// The least spread of the keyframe boxes' rays for C_e to come from their nearest point
 /// ([`Target::located_center`]): the smallest eigenvalue of their mean `I − d dᵀ`, about that
@@ -226,6 +226,12 @@ impl Target {
     /// How many keyframe boxes' rays are recorded.
     pub fn box_rays(&self) -> usize {
         self.box_rays.len()
+    }
+
+    /// How far around `center` (world ENU, m) this target's keyframe boxes were seen from,
+    /// degrees ([`super::triangulation::view_arc_deg`]).
+    pub fn view_arc_deg(&self, center: &Point3<f64>) -> f64 {
+        view_arc_deg(&self.box_rays, center)
     }
 
     /// How many keyframes gave an object centre from their depth.

@@ -46,6 +46,9 @@ pub struct TargetState {
     pub ready_for_fine_localization: bool,
     /// KL stayed below the threshold long enough.
     pub converged: bool,
+    /// How far around `center` its keyframe boxes were seen from, degrees
+    /// ([`Target::view_arc_deg`]).
+    pub view_arc_deg: f64,
     /// Horizontal covariance `[σxx, σxy, σyy]`, m².
     pub covariance_xy: [f64; 3],
     /// Spread of the point set along each ENU axis (1σ), metres: how far the filter itself
@@ -267,9 +270,11 @@ impl Perception {
 
     fn state_of(&self, target: &Target) -> TargetState {
         let c = target.covariance();
+        let center = target.located_center(self.catalog.config().center_from_depth_views);
         TargetState {
             id: target.id(),
-            center: target.located_center(self.catalog.config().center_from_depth_views),
+            center,
+            view_arc_deg: target.view_arc_deg(&center),
             points: target.points().to_vec(),
             points_center: target.center(),
             ready_for_fine_localization: target.status() != FilterStatus::Tracking,

@@ -434,9 +434,18 @@ impl<'a> Mission<'a> {
                     {
                         self.resume_search(timings)?;
                     }
-                    Some(state) if state.converged => self.start_mapping(id, timings)?,
+                    Some(state) if state.converged && self.seen_all_round(&state) => {
+                        self.start_mapping(id, timings)?
+                    }
                     Some(state) if self.sensors.vehicle().trajectory_done() => {
-                        if self.inputs.config.map_unconverged_targets
+                        if state.converged {
+                            tracing::info!(
+                                "target {id}: the fine-localization circle ended with its views \
+                                 {:.0}° around it; mapping it",
+                                state.view_arc_deg
+                            );
+                            self.start_mapping(id, timings)?;
+                        } else if self.inputs.config.map_unconverged_targets
                             && state.ready_for_fine_localization
                         {
                             tracing::info!(
@@ -719,6 +728,12 @@ impl<'a> Mission<'a> {
         }
     }
 
+    /// Whether a target's keyframe boxes were seen from far enough around it for its C_e
+    /// (`fine_localization_min_view_arc_deg`).
+    fn seen_all_round(&self, state: &TargetState) -> bool {
+        state.view_arc_deg >= self.inputs.config.fine_localization_min_view_arc_deg
+    }
+
     fn start_fine_localization(
         &mut self,
         id: u32,
@@ -730,7 +745,7 @@ impl<'a> Mission<'a> {
         let Some(state) = self.perception.target_state(id) else {
             return Ok(());
         };
-        if state.converged {
+        if state.converged && self.seen_all_round(&state) {
             return self.start_mapping(id, timings);
         }
         let clock = Instant::now();
