@@ -5,7 +5,7 @@ use serde::{Deserialize, Serialize};
 
 use super::LocalizationConfig;
 use super::gaussian::{Ellipsoid, Gaussian3};
-use super::triangulation::{BoxRay, nearest_point, view_arc_deg};
+use super::triangulation::{BoxRay, nearest_point, span_deg, view_arc_deg};
 
 /// The least spread of the keyframe boxes' rays for C_e to come from their nearest point
 /// ([`Target::located_center`]): the smallest eigenvalue of their mean `I − d dᵀ`, about that
@@ -321,23 +321,6 @@ impl Target {
     pub fn last_track_id(&self) -> Option<u64> {
         self.last_track_id
     }
-}
-
-/// The arc that holds every angle of `bearings_deg`: 360° less the widest gap between
-/// neighbours on the circle; 0 for fewer than two bearings.
-fn span_deg(mut bearings_deg: Vec<f64>) -> f64 {
-    if bearings_deg.len() < 2 {
-        return 0.0;
-    }
-    let wrapped: Vec<f64> = bearings_deg.iter().map(|b| b.rem_euclid(360.0)).collect();
-    bearings_deg = wrapped;
-    bearings_deg.sort_by(f64::total_cmp);
-    let wrap_gap = bearings_deg[0] + 360.0 - bearings_deg[bearings_deg.len() - 1];
-    let widest = bearings_deg
-        .windows(2)
-        .map(|w| w[1] - w[0])
-        .fold(wrap_gap, f64::max);
-    360.0 - widest
 }
 
 #[cfg(test)]

@@ -112,21 +112,29 @@ pub fn nearest_point(rays: &[BoxRay], min_spread: f64) -> Option<Point3<f64>> {
 /// the centre's height (session 64: a third of a circle's views left 17% of simulated centres
 /// over 0.5 m off in the estimate's frame, a full circle 4%).
 pub fn view_arc_deg(rays: &[BoxRay], center: &Point3<f64>) -> f64 {
-    let mut azimuths: Vec<f64> = rays
-        .iter()
-        .map(|r| r.origin - center)
-        .filter(|v| v.x.hypot(v.y) > 1e-6)
-        .map(|v| v.y.atan2(v.x).to_degrees())
-        .collect();
-    if azimuths.len() < 2 {
+    span_deg(
+        rays.iter()
+            .map(|r| r.origin - center)
+            .filter(|v| v.x.hypot(v.y) > 1e-6)
+            .map(|v| v.y.atan2(v.x).to_degrees())
+            .collect(),
+    )
+}
+
+/// The arc that holds every angle of `bearings_deg`: 360° less the widest gap between
+/// neighbours on the circle; 0 for fewer than two bearings.
+pub(crate) fn span_deg(mut bearings_deg: Vec<f64>) -> f64 {
+    if bearings_deg.len() < 2 {
         return 0.0;
     }
-    azimuths.sort_by(f64::total_cmp);
-    let wrap = azimuths[0] + 360.0 - azimuths[azimuths.len() - 1];
-    let widest = azimuths
+    let wrapped: Vec<f64> = bearings_deg.iter().map(|b| b.rem_euclid(360.0)).collect();
+    bearings_deg = wrapped;
+    bearings_deg.sort_by(f64::total_cmp);
+    let wrap_gap = bearings_deg[0] + 360.0 - bearings_deg[bearings_deg.len() - 1];
+    let widest = bearings_deg
         .windows(2)
         .map(|w| w[1] - w[0])
-        .fold(wrap, f64::max);
+        .fold(wrap_gap, f64::max);
     360.0 - widest
 }
 
