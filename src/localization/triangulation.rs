@@ -109,8 +109,9 @@ pub fn nearest_point(rays: &[BoxRay], min_spread: f64) -> Option<Point3<f64>> {
 /// error put the target, and a view looking down at a pitch moves it vertically by its
 /// horizontal error toward the target times the tangent of that pitch. Views all round cancel
 /// that; an arc of views does not, and the state estimate's walk over the arc's time is left in
-/// the centre's height (session 64: a third of a circle's views left 17% of simulated centres
-/// over 0.5 m off in the estimate's frame, a full circle 4%).
+/// the centre's height (session 64, `docs/campaigns/tools/ray_arc_sim.py`: views over 230° of
+/// the circle left 13% of simulated centres over 0.5 m off in the estimate's frame, views all
+/// round 6%).
 pub fn view_arc_deg(rays: &[BoxRay], center: &Point3<f64>) -> f64 {
     span_deg(
         rays.iter()
@@ -127,8 +128,9 @@ pub(crate) fn span_deg(mut bearings_deg: Vec<f64>) -> f64 {
     if bearings_deg.len() < 2 {
         return 0.0;
     }
-    let wrapped: Vec<f64> = bearings_deg.iter().map(|b| b.rem_euclid(360.0)).collect();
-    bearings_deg = wrapped;
+    for bearing in &mut bearings_deg {
+        *bearing = bearing.rem_euclid(360.0);
+    }
     bearings_deg.sort_by(f64::total_cmp);
     let wrap_gap = bearings_deg[0] + 360.0 - bearings_deg[bearings_deg.len() - 1];
     let widest = bearings_deg

@@ -48,8 +48,8 @@ pub struct MissionConfig {
     /// 7–10 m circle is 9–12° of it). Why: C_e is where the views' rays meet, and the state
     /// estimate's walk over an arc of views moves that point vertically by the walk's change
     /// toward the target times the tangent of the camera's pitch; views all round cancel it.
-    /// Session 64 found the misses of the 0.5 m bound in the estimate's frame where the filter
-    /// converged after 217–264° of circle. 0 maps on convergence alone (the paper).
+    /// Session 64 found every miss of the 0.5 m bound in the estimate's frame where the filter
+    /// had converged after 204–286° of circle. 0 maps on convergence alone (the paper).
     pub fine_localization_min_view_arc_deg: f64,
     /// Start a target's depth filter afresh when its fine-localization circle begins, so its
     /// centre comes from that circle's views alone. The state estimate drifts by metres over a

@@ -63,11 +63,12 @@ def targets(run):
         mean_walk = np.array(target["estimator_error_at_localization_m"])
         reference = np.array(target["localized_center"]) - np.array(offset)
         true_centroid = reference - mean_walk
+        flown = meeting_point(origins, directions)
         yield dict(
             run=os.path.basename(os.path.normpath(run)), id=target["id"],
             rock=target.get("gt_rock_id"), rays=len(rays),
-            arc=view_arc_deg(origins, meeting_point(origins, directions)),
-            flown=meeting_point(origins, directions) - reference,
+            arc=view_arc_deg(origins, flown),
+            flown=flown - reference,
             true=meeting_point(origins - walk, true_directions) - true_centroid,
             walk=meeting_point(origins, true_directions) - reference,
             attitude=meeting_point(origins - walk, directions) - true_centroid,
