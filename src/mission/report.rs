@@ -79,8 +79,9 @@ pub struct TargetReport {
     /// shifted the map (for up to `mapping.max_dropped_s` in a row).
     #[serde(default)]
     pub frames_dropped: usize,
-    /// Frames after a gap in view (`mapping.reacquisition_min_gap_s`) tracked from a search
-    /// over the state estimate's walk (`mapping.reacquisition_sigmas`), kept or dropped.
+    /// Frames after a gap in view (`mapping.reacquisition_min_gap_s`) or after dropped frames
+    /// (`mapping.reacquisition_after_drops`) tracked from a search over the state estimate's
+    /// walk (`mapping.reacquisition_sigmas`), kept or dropped.
     #[serde(default)]
     pub reacquisitions: usize,
     /// Keyframes in its bundle adjustment.

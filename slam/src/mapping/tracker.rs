@@ -549,8 +549,9 @@ impl ModelTracker {
 
     /// Tracks `source` against `reference` (at `world_from_reference`) from the grid of
     /// guesses about `world_from_guess` that [`ModelTrackingConfig::reacquisition`] spans after
-    /// a gap of `gap_s` seconds; `None` (track from the one guess) without a search or when
-    /// the gap is too short for one.
+    /// a gap of `gap_s` seconds; `None` (track from the one guess) without a search, when it
+    /// does not apply (a short gap, no frame dropped since the last one kept:
+    /// [`ReacquisitionSearch::applies`]) or when the grid is the one guess.
     fn reacquire(
         &self,
         reference: &TrackingReference,
@@ -559,7 +560,12 @@ impl ModelTracker {
         world_from_guess: &Isometry3<f64>,
         gap_s: f64,
     ) -> Result<Option<(OdometryResult, Reacquisition)>, MappingError> {
-        let Some(search) = &self.config.reacquisition else {
+        let Some(search) = self
+            .config
+            .reacquisition
+            .as_ref()
+            .filter(|search| search.applies(gap_s, self.dropped_in_a_row))
+        else {
             return Ok(None);
         };
         let offsets_m = search.offsets_m(gap_s);
