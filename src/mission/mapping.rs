@@ -1359,7 +1359,12 @@ mod tests {
         impl FnMut(&mut MappingSession, u32, f64, f64),
     ) {
         let rock = world.targets().next().unwrap();
-        let config = MissionConfig::default();
+        let mut config = MissionConfig::default();
+        // These tests are about the guarded stretch, and need its frames tracked. The small
+        // camera's 3° steps drop a frame now and then; searching after each (the default)
+        // keeps the map closer (10 mm against 17–22 mm by step 29) but had the stretch's first
+        // frame diverge, where one guess and a re-acquisition after a 1 s run tracked it.
+        config.mapping.reacquisition_after_drops = false;
         let camera = PinholeCamera::from_hfov(160, 120, 87.0).unwrap();
         let cylinder = rock_cylinder(world, rock, &Vector3::zeros(), &config.cylinder).unwrap();
         let session = MappingSession::new(1, &cylinder, &camera, &config).unwrap();
@@ -1453,7 +1458,7 @@ mod tests {
         }
         view(&mut session, 40, 0.0, 2.0);
         let stop = session.guarded_stretch().unwrap().stop.clone().unwrap();
-        assert_eq!(stop.at_s, 6.0);
+        assert_eq!(stop.at_s, 6.0, "{}", stop.reason);
         assert!(stop.reason.contains("re-acquired"), "{}", stop.reason);
         assert_eq!(session.guarded_stretch().unwrap().frames_mapped, 10);
     }
