@@ -368,19 +368,20 @@ pub struct MappingConfig {
     /// a grid of guesses spanning the state estimate's walk over the gap (`[estimator]`'s
     /// position σ, correlation time and white noise), not from one. Default 1.0.
     pub reacquisition_min_gap_s: f64,
-    /// The first mapped frame kept after frames were dropped (`max_dropped_s`) is searched
-    /// for the same way, however short the run. Default true. Why: over a run of dropped frames
-    /// the estimate's motion is off by its white noise and its walk at once; on the default
-    /// world's seed 62 (session 65) a 0.9 s run ended on a frame tracked from that one guess,
-    /// 0.4 m out, which converged 0.13 m beside the truth at an inlier ratio of 0.34 and split
-    /// the map in two (F@2cm 0.34, α +6.7° outside its interval).
-    pub reacquisition_after_drops: bool,
     /// ... spanning this many σ of the walk (the horizontal radius and vertical half height of
     /// the search); 0 turns the search off. Default 3. Why: the odometry corrects a guess by at
     /// most `odometry.max_correction_m` (0.5 m), and the GPS walks by a metre in 14 s. On
     /// holdout-c seed 48 a frame re-acquired that way converged 1.3 m beside the truth at an
     /// inlier ratio of 0.30, and the keyframe taken there shifted the rest of the map.
     pub reacquisition_sigmas: f64,
+    /// The first mapped frame kept after frames were dropped (`max_dropped_s`) is searched
+    /// for the same way (`reacquisition_min_gap_s`), however short the run. Default true.
+    /// Why: over a run of dropped frames the estimate's motion is off by its white noise and
+    /// its walk at once; on the default
+    /// world's seed 62 (session 65) a 0.9 s run ended on a frame tracked from that one guess,
+    /// 0.4 m out, which converged 0.13 m beside the truth at an inlier ratio of 0.34 and split
+    /// the map in two (F@2cm 0.34, α +6.7° outside its interval).
+    pub reacquisition_after_drops: bool,
 }
 
 impl MappingConfig {

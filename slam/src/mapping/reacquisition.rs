@@ -65,9 +65,9 @@ pub struct ReacquisitionSearch {
 impl ReacquisitionSearch {
     /// The search for an estimator whose position walks with σ `horizontal_sigma_m` and
     /// `vertical_sigma_m` per axis, correlation time `correlation_s` and white noise
-    /// `white_sigma_m`: after a gap of 1 s or more or after dropped frames, 3 σ of the walk, guesses 0.4 m apart (every
-    /// point of the search within 0.35 m of one, inside the odometry's 0.5 m reach), at most
-    /// 1500 of them, the best 4 tracked in full.
+    /// `white_sigma_m`: after a gap of 1 s or more or after dropped frames, 3 σ of the walk,
+    /// guesses 0.4 m apart (every point of the search within 0.35 m of one, inside the
+    /// odometry's 0.5 m reach), at most 1500 of them, the best 4 tracked in full.
     pub fn for_walk(
         horizontal_sigma_m: f64,
         vertical_sigma_m: f64,
