@@ -155,6 +155,10 @@ pub struct TargetRow {
     /// reported.
     #[serde(default)]
     pub reacquisitions: Option<u64>,
+    /// Keyframe links no landmark spans across dropped frames (the map held together there by
+    /// one odometry result after a loss of tracking), where reported.
+    #[serde(default)]
+    pub keyframe_links_unspanned_after_drops: Option<u64>,
     /// Tracked frames whose odometry the map frame's gate refused, where reported.
     #[serde(default)]
     pub map_frame_refusals: Option<u64>,
@@ -445,6 +449,7 @@ pub fn read_run(
             min_clearance_m: f(t, "min_clearance_m").or(run_row.min_clearance_m),
             ring_drift_m: f(t, "ring_drift_m"),
             reacquisitions: u(t, "reacquisitions"),
+            keyframe_links_unspanned_after_drops: u(t, "keyframe_links_unspanned_after_drops"),
             map_frame_refusals: u(t, "map_frame_refusals"),
             map_patched_fraction: f(t, "map_patched_fraction"),
             support_tilt_deg: f(t, "support_tilt_deg"),
@@ -648,6 +653,13 @@ pub fn totals(runs: &[RunRow], targets: &[TargetRow]) -> Totals {
             counted
                 .iter()
                 .filter_map(|t| Some((t.reacquisitions? as f64, at(t)))),
+        ),
+        figure(
+            "keyframe links across dropped frames no landmark spans, per target",
+            true,
+            counted
+                .iter()
+                .filter_map(|t| Some((t.keyframe_links_unspanned_after_drops? as f64, at(t)))),
         ),
         figure(
             "map frame refusals, per target",

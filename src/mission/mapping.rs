@@ -57,6 +57,9 @@ pub struct StoredFrame {
     /// Covariance of the odometry motion since the previous keyframe (see
     /// [`scarp_slam::mapping::KeyframeSet::odometry_covariance`]).
     pub odometry_covariance: Option<nalgebra::Matrix6<f64>>,
+    /// Frames dropped between the previous keyframe and this one: the odometry link to it
+    /// crossed a loss of tracking.
+    pub frames_dropped_before: usize,
 }
 
 /// The state of mapping one target.
@@ -79,6 +82,8 @@ pub struct MappingSession {
     navigation_error_m: Option<Vector3<f64>>,
     /// Frames dropped: their odometry failed or disagreed with the state estimate.
     frames_dropped: usize,
+    /// Frames dropped since the last keyframe was stored.
+    dropped_since_keyframe: usize,
     /// Frames after a gap in view tracked from a search over the estimate's walk.
     reacquisitions: usize,
     /// `frames_mapped` when the map's patched share was last read, and that share (`None`
@@ -442,6 +447,7 @@ impl MappingSession {
             coverage_required: true,
             navigation_error_m: None,
             frames_dropped: 0,
+            dropped_since_keyframe: 0,
             reacquisitions: 0,
             patched_check: None,
             guard: None,
@@ -674,6 +680,7 @@ impl MappingSession {
         }
         if tracked.dropped {
             self.frames_dropped += 1;
+            self.dropped_since_keyframe += 1;
             tracing::debug!(
                 "target {}: frame at {:.2} s dropped: {}",
                 self.target_id,
@@ -701,6 +708,7 @@ impl MappingSession {
                 world_from_camera_estimate: *world_from_camera_estimate,
                 world_from_camera_truth: world_from_camera_truth.copied(),
                 odometry_covariance: tracked.keyframe_covariance,
+                frames_dropped_before: std::mem::take(&mut self.dropped_since_keyframe),
             });
         } else if !tracked.fell_back
             && self.between_stride > 0
@@ -749,6 +757,36 @@ fn trace_tracked_frame(
         error(&tracked.world_from_camera),
         error(world_from_camera_estimate),
     );
+}
+
+/// Records in `report` the keyframe links no landmark spans (`spanning[i]` landmarks span the
+/// link from keyframe `i` to `i + 1`, stamped `timestamps_s`), and those among them that
+/// crossed dropped frames (`dropped_before[i + 1]`), each with a WARN line: there the map's two
+/// parts are held together by one odometry result after a loss of tracking, which nothing in
+/// the adjustment checks.
+fn report_unspanned_links(
+    report: &mut TargetReport,
+    spanning: &[usize],
+    dropped_before: &[usize],
+    timestamps_s: &[f64],
+) {
+    let unspanned: Vec<usize> = (0..spanning.len()).filter(|&i| spanning[i] == 0).collect();
+    report.keyframe_links_unspanned = unspanned.len();
+    report.keyframe_links_unspanned_after_drops = 0;
+    for &i in &unspanned {
+        let dropped = dropped_before.get(i + 1).copied().unwrap_or(0);
+        if dropped == 0 {
+            continue;
+        }
+        report.keyframe_links_unspanned_after_drops += 1;
+        tracing::warn!(
+            "target {}: keyframes at {:.2} s and {:.2} s are joined across {dropped} dropped \
+             frames by the odometry alone: no landmark spans them",
+            report.id,
+            timestamps_s.get(i).copied().unwrap_or(f64::NAN),
+            timestamps_s.get(i + 1).copied().unwrap_or(f64::NAN),
+        );
+    }
 }
 
 /// Writes the keyframes' trajectories (TUM, `world_from_camera`, stamped with `timestamps_s`):
@@ -900,6 +938,7 @@ pub fn finish_target(
     }
     // The frames move into the keyframe set; the truth stays beside it for the evaluation.
     let timestamps_s: Vec<f64> = stored.iter().map(|f| f.frame.timestamp_s).collect();
+    let dropped_before: Vec<usize> = stored.iter().map(|f| f.frames_dropped_before).collect();
     let truth: Option<Vec<StampedPose>> = stored
         .iter()
         .map(|f| {
@@ -951,6 +990,12 @@ pub fn finish_target(
         refined.ba_ms * 1e-3,
         refined.reintegrate_ms * 1e-3,
         refined.mesh_ms * 1e-3,
+    );
+    report_unspanned_links(
+        report,
+        &refined.tracks.landmarks_spanning_links(timestamps_s.len()),
+        &dropped_before,
+        &timestamps_s,
     );
     let mesh = refined.mesh;
     let refined = refined.world_from_camera;
@@ -1326,6 +1371,27 @@ mod tests {
             }
         }
         eprintln!("worst centre error {worst_m:.2} m");
+    }
+
+    #[test]
+    fn only_unspanned_links_across_dropped_frames_count_as_after_drops() {
+        let mut report = TargetReport {
+            keyframe_links_unspanned_after_drops: 7,
+            ..TargetReport::default()
+        };
+        // Links 0..4; 1 and 3 are unspanned; keyframe 2 follows 5 drops, keyframe 4 none,
+        // keyframe 1 follows 2 drops but its link is spanned.
+        report_unspanned_links(
+            &mut report,
+            &[4, 0, 9, 0],
+            &[0, 2, 5, 0, 0],
+            &[0.0, 1.0, 2.0, 3.0, 4.0],
+        );
+        assert_eq!(report.keyframe_links_unspanned, 2);
+        assert_eq!(report.keyframe_links_unspanned_after_drops, 1);
+        report_unspanned_links(&mut report, &[], &[0], &[0.0]);
+        assert_eq!(report.keyframe_links_unspanned, 0);
+        assert_eq!(report.keyframe_links_unspanned_after_drops, 0);
     }
 
     #[test]

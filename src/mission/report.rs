@@ -86,6 +86,14 @@ pub struct TargetReport {
     pub reacquisitions: usize,
     /// Keyframes in its bundle adjustment.
     pub keyframes: usize,
+    /// Links between consecutive keyframes that no landmark of the adjustment spans: the map's
+    /// parts on either side are held together by the odometry alone.
+    #[serde(default)]
+    pub keyframe_links_unspanned: usize,
+    /// Of those, the links across dropped frames (a loss of tracking), where a frame tracked
+    /// off after the loss splits the map unchecked.
+    #[serde(default)]
+    pub keyframe_links_unspanned_after_drops: usize,
     /// Whether its point set converged before mapping (false: mapped from a compact but
     /// unconverged point set, see `map_unconverged_targets`).
     pub localization_converged: bool,
