@@ -159,12 +159,12 @@ pub fn render(report: &CampaignReport) -> String {
 
     let _ = writeln!(
         md,
-        "\n## Targets\n\n| world | seed | rock | shape | status | F@1cm | F@2cm | seen | α_min (°) | truth (°) | error (°) | interval (°) | in | loc. error (m) | est.-frame (m) | its vertical (m) | centre, est.-frame (m) | min clearance (m) | collisions |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
+        "\n## Targets\n\n| world | seed | rock | shape | status | F@1cm | F@2cm | seen | α_min (°) | truth (°) | error (°) | interval (°) | in | loc. error (m) | est.-frame (m) | its vertical (m) | centre, est.-frame (m) | sweep (°) | min clearance (m) | collisions |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
     );
     for r in &report.targets {
         let _ = writeln!(
             md,
-            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
             r.world,
             r.seed,
             r.rock_id,
@@ -193,6 +193,7 @@ pub fn render(report: &CampaignReport) -> String {
                 (Some(e), Some("scan")) => format!("{e:.2} (scan)"),
                 (e, _) => num(e, 2),
             },
+            num(r.sweep_deg, 0),
             num(r.min_clearance_m, 2),
             r.run_collisions.map_or("–".into(), |c| c.to_string()),
         );

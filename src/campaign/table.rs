@@ -162,6 +162,11 @@ pub struct TargetRow {
     /// Tracked frames whose odometry the map frame's gate refused, where reported.
     #[serde(default)]
     pub map_frame_refusals: Option<u64>,
+    /// How far round the rock's axis the camera went while mapping it, degrees, where
+    /// reported (`sweep_deg`): a flight that ends short of a full turn saw the base from part
+    /// of the way round only.
+    #[serde(default)]
+    pub sweep_deg: Option<f64>,
     /// The share of the rock patched over unseen parts and its cut in the map when mapping
     /// ended, where read (`map_patched_fraction`).
     #[serde(default)]
@@ -451,6 +456,7 @@ pub fn read_run(
             reacquisitions: u(t, "reacquisitions"),
             keyframe_links_unspanned_after_drops: u(t, "keyframe_links_unspanned_after_drops"),
             map_frame_refusals: u(t, "map_frame_refusals"),
+            sweep_deg: f(t, "sweep_deg"),
             map_patched_fraction: f(t, "map_patched_fraction"),
             support_tilt_deg: f(t, "support_tilt_deg"),
             run_collisions: run_row.collisions,
@@ -669,6 +675,11 @@ pub fn totals(runs: &[RunRow], targets: &[TargetRow]) -> Totals {
                 .filter_map(|t| Some((t.map_frame_refusals? as f64, at(t)))),
         ),
         figure(
+            "mapping flight's sweep round the rock (°)",
+            false,
+            counted.iter().filter_map(|t| Some((t.sweep_deg?, at(t)))),
+        ),
+        figure(
             "rock patched in the map when mapping ended (fraction of its closed surface)",
             true,
             counted
@@ -821,7 +832,7 @@ mod tests {
                  "fscore_1cm": 0.8, "fscore_2cm": 0.9, "alpha_min_deg": 5.0 + alpha,
                  "alpha_min_gt_deg": 5.0, "localization_error_m": 0.7,
                  "alpha_min_low_deg": 4.0 + 0.9 * alpha, "alpha_min_high_deg": 6.0 + alpha,
-                 "gt_visible_fraction": 0.9 - 0.1 * alpha,
+                 "gt_visible_fraction": 0.9 - 0.1 * alpha, "sweep_deg": 230.0 + 150.0 * alpha,
                  "localization_offset_estimate_frame_m": [0.3, -0.4, 0.1 * alpha],
                  "localized_sigma_m": [0.4, 0.4, 0.5]},
                 {"id": 4, "status": "mapped", "gt_rock_id": 10, "gt_role": "distractor"},
@@ -896,6 +907,8 @@ mod tests {
         assert_eq!(first.localization_error_m, Some(0.7));
         assert_eq!(first.min_clearance_m, Some(0.8 - 0.1));
         assert_eq!(first.gt_visible_fraction, Some(0.9 - 0.1));
+        assert_eq!(first.sweep_deg, Some(380.0));
+        assert_eq!(rows[3].sweep_deg, None);
         assert_eq!(first.localization_vertical_estimate_frame_m, Some(0.1));
         assert!((first.localization_horizontal_estimate_frame_m.unwrap() - 0.5).abs() < 1e-12);
         assert_eq!(rows[3].localization_vertical_estimate_frame_m, None);
@@ -970,6 +983,12 @@ mod tests {
             "the smallest is the worst: {worst}"
         );
         assert_eq!(clearance.worst_at.as_deref(), Some("runs/w/seed-1"));
+        let sweep = t.figures.iter().find(|f| f.name.contains("sweep")).unwrap();
+        assert_eq!(
+            (sweep.n, sweep.worst, sweep.worst_at.as_deref()),
+            (2, Some(380.0), Some("runs/w/seed-0#rock-1")),
+            "the shortest flight round the rock is the worst"
+        );
         assert!((t.interval_width_median_deg.unwrap() - 2.225).abs() < 1e-12);
         assert_eq!(t.truth_in_interval, Rate::new(1, 2));
     }
