@@ -103,6 +103,10 @@ impl ProceduralTerrain {
     }
 }
 
+/// The widest grid [`read_esri_ascii`] accepts, metres: Earth's quarter meridian. Wider, the
+/// f32 vertices of its mesh lose all precision.
+const MAX_GRID_EXTENT_M: f64 = 1.0e7;
+
 /// `height_m` rounded to the f32 precision of the terrain mesh's vertices, so that the
 /// heightfield the planner and the clearance checks read is the very surface the renderer draws.
 fn mesh_precision(height_m: f64) -> f64 {
@@ -152,7 +156,8 @@ pub fn terrain_mesh(heightfield: &Heightfield) -> TriangleMesh {
 ///
 /// # Errors
 /// [`DatasetError::Io`] for an unreadable file; [`DatasetError::Parse`] naming the line for
-/// a bad header, a bad number, a wrong value count, or a grid with no valid height.
+/// a bad header (or a grid wider than 10 000 km), a bad number (or a height beyond f32's
+/// range), a wrong value count, or a grid with no valid height.
 pub fn read_esri_ascii(path: &Path) -> Result<Heightfield, DatasetError> {
     let text = std::fs::read_to_string(path).map_err(|e| DatasetError::io(path, e))?;
     parse_esri_ascii(&text).map_err(|(line, message)| DatasetError::Parse {
@@ -162,7 +167,9 @@ pub fn read_esri_ascii(path: &Path) -> Result<Heightfield, DatasetError> {
     })
 }
 
-fn parse_esri_ascii(text: &str) -> Result<Heightfield, (usize, String)> {
+/// Parses ESRI ASCII grid text; see [`read_esri_ascii`]. Errors carry the 1-based line and a
+/// message.
+pub fn parse_esri_ascii(text: &str) -> Result<Heightfield, (usize, String)> {
     let mut header = std::collections::BTreeMap::new();
     let mut lines = text.lines().enumerate().peekable();
     while let Some((number, line)) = lines.peek().copied() {
@@ -200,6 +207,17 @@ fn parse_esri_ascii(text: &str) -> Result<Heightfield, (usize, String)> {
     if !(cellsize > 0.0 && cellsize.is_finite()) {
         return Err((1, format!("cellsize {cellsize} must be positive")));
     }
+    // The mesh's vertices are f32 world coordinates about the grid's centre.
+    if cellsize * ncols.max(nrows) > MAX_GRID_EXTENT_M {
+        return Err((
+            1,
+            format!(
+                "cellsize {cellsize} m × {} cells spans more than {} km",
+                ncols.max(nrows),
+                MAX_GRID_EXTENT_M / 1000.0
+            ),
+        ));
+    }
     let (nx, ny) = (ncols as usize, nrows as usize);
     let nodata = header.get("nodata_value").copied();
     let mut values = Vec::with_capacity(nx * ny);
@@ -210,6 +228,12 @@ fn parse_esri_ascii(text: &str) -> Result<Heightfield, (usize, String)> {
             let v: f64 = word
                 .parse()
                 .map_err(|_| (number + 1, format!("`{word}` is not a number")))?;
+            if v.is_finite() && v.abs() > f64::from(f32::MAX) && nodata != Some(v) {
+                return Err((
+                    number + 1,
+                    format!("height `{word}` is beyond the range of a 32-bit float"),
+                ));
+            }
             values.push(v);
         }
     }

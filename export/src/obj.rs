@@ -36,7 +36,7 @@ pub enum ObjError {
 ///
 /// # Errors
 /// [`ObjError::Io`] for an unreadable file; [`ObjError::Parse`] naming the line for a bad
-/// number, an index out of range, a face with fewer than three corners, or a file without faces.
+/// number (or a coordinate beyond f32's range), an index out of range, a face with fewer than three corners, or a file without faces.
 pub fn read_obj(path: &Path) -> Result<TriangleMesh, ObjError> {
     let text = std::fs::read_to_string(path).map_err(|source| ObjError::Io {
         path: path.to_path_buf(),
@@ -69,6 +69,14 @@ pub fn parse_obj(text: &str) -> Result<TriangleMesh, (usize, String)> {
                     .collect::<Result<_, _>>()?;
                 if values.len() < 3 || !values.iter().all(|v| v.is_finite()) {
                     return Err((line_no, "a vertex needs three finite coordinates".into()));
+                }
+                // Positions are stored as f32: a coordinate beyond its range would become
+                // infinite.
+                if values[..3].iter().any(|v| v.abs() > f64::from(f32::MAX)) {
+                    return Err((
+                        line_no,
+                        "a vertex coordinate is beyond the range of a 32-bit float".into(),
+                    ));
                 }
                 mesh.positions.push(Point3::new(
                     values[0] as f32,

@@ -111,8 +111,8 @@ pub fn format_boxes(records: &[BoxRecord]) -> String {
 /// Parses `boxes.txt`.
 ///
 /// # Errors
-/// [`DatasetError::Parse`] naming the file and line for a wrong field count, a bad number, an
-/// unknown role or inverted bounds.
+/// [`DatasetError::Parse`] naming the file and line for a wrong field count, a bad number (a
+/// timestamp must be finite), an unknown role or inverted bounds.
 pub fn parse_boxes(text: &str, path: &Path) -> Result<Vec<BoxRecord>, DatasetError> {
     let mut records = Vec::new();
     for (number, line) in text.lines().enumerate() {
@@ -130,7 +130,9 @@ pub fn parse_boxes(text: &str, path: &Path) -> Result<Vec<BoxRecord>, DatasetErr
         }
         let timestamp_s: f64 = words[0]
             .parse()
-            .map_err(|_| bad(format!("`{}` is not a timestamp", words[0])))?;
+            .ok()
+            .filter(|t: &f64| t.is_finite())
+            .ok_or_else(|| bad(format!("`{}` is not a timestamp", words[0])))?;
         let id: u32 = words[1]
             .parse()
             .map_err(|_| bad(format!("`{}` is not an id", words[1])))?;

@@ -17,6 +17,6 @@ pub use camera_file::CameraFile;
 pub use images::{
     read_depth_png, read_mask_png, read_rgb_png, write_depth_png, write_mask_png, write_rgb_png,
 };
-pub use lists::{BoxRecord, boxes_from_mask, format_boxes, parse_boxes};
+pub use lists::{BoxRecord, boxes_from_mask, format_boxes, parse_boxes, parse_image_list};
 pub use read::{MAX_ASSOCIATION_DT_S, Sequence, SequenceEntry};
 pub use write::{RenderSettings, SequenceSummary, frame_name, write_image_lists, write_sequence};

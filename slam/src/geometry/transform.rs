@@ -21,6 +21,14 @@ pub fn quaternion_from_xyzw(
             what: "quaternion".into(),
         });
     }
+    // The norm of components near f64::MAX overflows to infinity, and dividing by it would
+    // give a zero "unit" quaternion: such a quaternion is scaled by its largest component
+    // first (only then, so that every other one normalises bit for bit as before).
+    let q = if q.norm().is_finite() {
+        q
+    } else {
+        q / q.coords.amax()
+    };
     UnitQuaternion::try_new(q, 1e-9)
         .ok_or_else(|| SlamError::Degenerate("quaternion with zero norm".into()))
 }
@@ -172,6 +180,12 @@ mod tests {
     fn quaternion_rejects_nan_and_zero() {
         assert!(quaternion_from_xyzw(f64::NAN, 0.0, 0.0, 1.0).is_err());
         assert!(quaternion_from_xyzw(0.0, 0.0, 0.0, 0.0).is_err());
+        assert!(quaternion_from_xyzw(0.0, 0.0, 1e-10, 0.0).is_err());
+        // Components whose squares overflow still give the rotation they encode.
+        let huge = quaternion_from_xyzw(0.0, 0.0, 1e300, 1e300).unwrap();
+        let quarter_turn =
+            UnitQuaternion::from_axis_angle(&Vector3::z_axis(), std::f64::consts::FRAC_PI_2);
+        assert!(huge.angle_to(&quarter_turn) < 1e-12, "{huge}");
         let q = quaternion_from_xyzw(0.0, 0.0, 0.0, 2.0).unwrap();
         assert!((q.w - 1.0).abs() < 1e-15);
     }
