@@ -36,7 +36,8 @@ pub enum ObjError {
 ///
 /// # Errors
 /// [`ObjError::Io`] for an unreadable file; [`ObjError::Parse`] naming the line for a bad
-/// number (or a coordinate beyond f32's range), an index out of range, a face with fewer than three corners, or a file without faces.
+/// number (or a coordinate beyond f32's range), an index out of range, a face with fewer than
+/// three corners, or a file without faces.
 pub fn read_obj(path: &Path) -> Result<TriangleMesh, ObjError> {
     let text = std::fs::read_to_string(path).map_err(|source| ObjError::Io {
         path: path.to_path_buf(),

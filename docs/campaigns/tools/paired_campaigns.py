@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
 # Target by target, two campaign directories flown on the same worlds and seeds (for example two
 # configurations): alpha error, interval width and whether it holds the truth, F@1/2cm and
-# estimate-frame localization; per run wall, map and BA times; paired totals.
+# estimate-frame localization; per run wall, map and BA times; paired totals (with frames
+# dropped, searches after drops and localizations within 0.5 m in the estimate frame).
 # usage: paired_campaigns.py CAMP_A CAMP_B
 import json, sys, glob, os, statistics as st
 a, b = sys.argv[1], sys.argv[2]
@@ -49,7 +50,15 @@ def tot(i):
     f2 = [t['fscore_2cm'] for t in ts if t.get('fscore_2cm')]
     return '%d targets, %d analysed, |aerr|<=2: %d, inside: %d, median width %.2f, mean F1 %.4f min %.4f, mean F2 %.4f min %.4f' % (
         len(ts), len(al), ok, inside, st.median(w) if w else float('nan'), st.mean(f1), min(f1), st.mean(f2), min(f2))
+def flight(i):
+    ts = [r[i] for r in rows]
+    loc = [t['localization_error_estimate_frame_m'] for t in ts
+           if t.get('localization_error_estimate_frame_m') is not None]
+    return 'frames dropped %d, searches after drops %d, localization <= 0.5 m %d of %d' % (
+        sum(t.get('frames_dropped') or 0 for t in ts), sum(t.get('reacquisitions') or 0 for t in ts),
+        sum(e <= 0.5 for e in loc), len(loc))
 print('A:', tot(0)); print('B:', tot(1))
+print('A:', flight(0)); print('B:', flight(1))
 d = [(x['alpha_error_deg'], y['alpha_error_deg']) for x, y in rows if x.get('alpha_error_deg') is not None and y.get('alpha_error_deg') is not None]
 if d:
     diffs = [abs(q - p) for p, q in d]
