@@ -17,6 +17,7 @@ import glob
 import json
 import math
 import os
+import statistics
 import sys
 
 
@@ -70,12 +71,6 @@ def interval(scan, margin):
     return max(scan['alpha'] - math.sqrt(below), 0.0), scan['alpha'] + math.sqrt(above)
 
 
-def median(values):
-    values = sorted(values)
-    n = len(values)
-    return (values[n // 2] + values[(n - 1) // 2]) / 2 if n else float('nan')
-
-
 def report(rows, margin):
     inside, widths, misses = 0, [], []
     for r in rows:
@@ -90,7 +85,7 @@ def report(rows, margin):
     name = 'shipped' if margin is None else f'margin {margin:.2f}°'
     n = len(rows)
     print(f"{name:>15}: inside {inside}/{n} ({100 * inside / max(n, 1):.0f}%), "
-          f"median width {median(widths):.2f}°; misses: {', '.join(misses) or 'none'}")
+          f"median width {statistics.median(widths):.2f}°; misses: {', '.join(misses) or 'none'}")
 
 
 def main(argv):
@@ -107,7 +102,7 @@ def main(argv):
         return 2
     rows = scans(dirs)
     errors = [r['alpha'] - r['truth'] for r in rows]
-    print(f"{len(rows)} distinct analysed scans; signed error median {median(errors):+.2f}°, "
+    print(f"{len(rows)} distinct analysed scans; signed error median {statistics.median(errors):+.2f}°, "
           f"within 2° {sum(abs(e) <= 2 for e in errors)}")
     report(rows, None)
     for m in margins:
