@@ -394,7 +394,8 @@ pub struct AlphaInterval {
 pub struct IntervalSource {
     /// What moves α_min: `perturbation` (mesh noise and contact height, the perturbation
     /// study), `support_plane`, `profile_model`, `unseen_support_edge`, `unseen_base`,
-    /// `contact_edge`, `unseen_shape` or `margin` ([`scan::analyze_closed_scan`] names each).
+    /// `contact_edge`, `deep_fill`, `unseen_shape` or `margin` ([`scan::analyze_closed_scan`]
+    /// names each).
     pub name: String,
     /// How far it may lower α_min, degrees (≥ 0).
     pub below_deg: f64,

@@ -157,6 +157,15 @@ pub struct ScanConfig {
     /// A base that hangs a few millimetres over its support (the double rock's near-flush
     /// base) is contact to 1 cm voxels but not to the rock. Default 0.01 (one voxel).
     pub contact_edge_m: f64,
+    /// How high above the support the TSDF may have filled the wedge between the rock's
+    /// underside and its support, metres: the α_min interval's `deep_fill` source (below only)
+    /// reads the contact again from the profile's slabs above this height, as if those below
+    /// were the fill's wall and not the rock. Default 0.04, the fusion's truncation band (4
+    /// voxels of 1 cm): a gap thinner than the band closes. The readings' own skip of one slab
+    /// covers the usual 1–2 cm fill; a deeper fill widens every slab under it and overstates
+    /// α_min (`the_interval_covers_a_contact_hidden_under_a_deep_fill`). 0 turns the source
+    /// off.
+    pub fill_depth_m: f64,
     /// A scan is refused when opening the support outline's unseen sectors raises the median
     /// α_min reading by more than this, degrees: the unseen edge then decides α_min. Default
     /// 5: the squat block of library-b (a flat base on a narrower pedestal seen on one side,
@@ -247,6 +256,7 @@ impl Default for ScanConfig {
             max_filled_fraction: 0.4,
             interval_margin_deg: 1.5,
             contact_edge_m: 0.01,
+            fill_depth_m: 0.04,
             max_unseen_support_effect_deg: 5.0,
             min_contact_to_edge_m: 0.05,
             unseen_bulge_ratio: 0.5,
@@ -280,6 +290,7 @@ impl ScanConfig {
             ("scan.contact_near_m", self.contact_near_m),
             ("scan.interval_margin_deg", self.interval_margin_deg),
             ("scan.contact_edge_m", self.contact_edge_m),
+            ("scan.fill_depth_m", self.fill_depth_m),
             ("scan.min_contact_to_edge_m", self.min_contact_to_edge_m),
             ("scan.unseen_bulge_ratio", self.unseen_bulge_ratio),
             ("scan.support_mesh_sigma_m", self.support_mesh_sigma_m),
@@ -1018,6 +1029,16 @@ fn too_little_base_seen(near: usize, sectors: usize, config: &ScanConfig) -> Fra
         "{}: too little to extrapolate the contact (map the base from lower views)",
         base_seen_in(near, sectors, config)
     ))
+}
+
+/// How many of a profile's lowest slabs (those of `config`) have their tops within
+/// [`ScanConfig::fill_depth_m`] of the plane: the `deep_fill` source's readings skip that many
+/// measured slabs per sector (where the cut leaves the lowest slab empty, the fit starts one
+/// slab higher, which only lowers the reading further).
+fn fill_slab_count(config: &ScanConfig) -> usize {
+    ((config.fill_depth_m - config.profile_first_m) / PROFILE_SLAB_M + 0.5 + 1e-9)
+        .floor()
+        .max(0.0) as usize
 }
 
 /// How many of a profile's lowest slabs (those of `config`) are centred within `near_m` of the
@@ -2331,6 +2352,8 @@ pub fn analyze_scan(
 ///   where the base is seen in fewer than [`ScanConfig::profile_min_near_fraction`] of the
 ///   directions, an effect over [`ScanConfig::max_unseen_base_effect_deg`] refuses the scan;
 /// - `contact_edge`: the contact shrunk by [`ScanConfig::contact_edge_m`];
+/// - `deep_fill`: below only, the lowest reading of the models and fits fitted above
+///   [`ScanConfig::fill_depth_m`], where the TSDF's fill of the wedge under the rock may end;
 /// - `unseen_shape`: the centre of mass moved by the unseen patches' bulge
 ///   ([`ClosedScan::unseen_shape_alpha_spread_deg`], [`ScanConfig::unseen_bulge_ratio`]);
 /// - `margin`: [`ScanConfig::interval_margin_deg`].
@@ -2507,6 +2530,46 @@ fn analyze_in_support_frame(
                 )));
             }
             sources.push(IntervalSource::new("unseen_base", 0.0, effect));
+        }
+    }
+    let fill_slabs = fill_slab_count(&config.scan);
+    if fill_slabs > 0 {
+        // The lowest reading of the models and fits, each fitted above the deepest fill and
+        // landing only on the surface above it: the surface under it may be the fill's wall,
+        // which only widens the contact, so the source reaches below only.
+        let above_fill = ENSEMBLE_MODELS
+            .into_iter()
+            .flat_map(|model| [3, 4, 6].map(|fit_slabs| (model, fit_slabs)))
+            .filter_map(|(model, fit_slabs)| {
+                let h = ContactHypothesis {
+                    model,
+                    skip_slabs: fill_slabs,
+                    fit_slabs,
+                    plane_offset_m: 0.0,
+                    gaps: OutlineGaps::Interpolated,
+                };
+                let contact = closed.contact_under(&h).ok()?;
+                let fill_top_z = contact.first()?[2] + config.scan.fill_depth_m;
+                let rock: Vec<Point3<f64>> = underside
+                    .iter()
+                    .filter(|p| p.z > fill_top_z)
+                    .copied()
+                    .collect();
+                let polygon = closed.landed_on(&contact, &rock, &com, h.gaps);
+                let rmax = |p: &[[f64; 3]]| {
+                    p.iter()
+                        .map(|q| (q[0] * q[0] + q[1] * q[1]).sqrt())
+                        .fold(0.0, f64::max)
+                };
+                first.alpha_min_on_contact(&polygon)
+            })
+            .min_by(f64::total_cmp);
+        if let Some(alpha) = above_fill {
+            sources.push(IntervalSource::new(
+                "deep_fill",
+                (point - alpha).max(0.0),
+                0.0,
+            ));
         }
     }
     let (below, above) =
@@ -3476,9 +3539,11 @@ mod tests {
         // The wedge is filled 4.5 cm up instead of 1.5 cm: the scan's lowest slabs are the
         // fill's wall, so every reading of the contact is too wide and the point estimate
         // overstates α_min by 1.8°. The interval must still hold the truth, without being
-        // vacuous. (With `interval_margin_deg` 1.0 it reached only 1.5° below the point.)
+        // vacuous, with the margin at 1° as well as its default (without the `deep_fill`
+        // source, 1° reached only 1.4° below the point).
         let (scan, truth) = wedge_scan_filled_to(0.045, true);
-        let config = FragilityConfig::default();
+        let mut config = FragilityConfig::default();
+        config.scan.interval_margin_deg = config.scan.interval_margin_deg.min(1.0);
         let truth = analyze(&truth, ContactSpec::Auto, &config).unwrap();
         let (_, analysis) = analyze_scan(&scan, &config).unwrap();
         let r = &analysis.report;
@@ -3500,11 +3565,30 @@ mod tests {
         assert_eq!(r.alpha_interval.source, "scan_contact");
         // Three models × two skips × three fits × three plane heights.
         assert_eq!(r.alpha_interval.contact_hypotheses, 54);
-        // Without its margin and contact edge the interval is the readings' spread alone, and
-        // misses.
+        let deep_fill = r
+            .alpha_interval
+            .sources
+            .iter()
+            .find(|s| s.name == "deep_fill")
+            .expect("a deep_fill source");
+        assert!(deep_fill.below_deg > 1.0, "{deep_fill:?}");
+        assert_eq!(deep_fill.above_deg, 0.0);
+        // Without the source, the 1° margin misses.
+        let mut shallow = config.clone();
+        shallow.scan.fill_depth_m = 0.0;
+        let (_, shallow) = analyze_scan(&scan, &shallow).unwrap();
+        assert!(
+            shallow.report.alpha_min_low_deg > truth.alpha_min_deg,
+            "{} vs {}",
+            shallow.report.alpha_min_low_deg,
+            truth.alpha_min_deg
+        );
+        // Without its margin, contact edge and deep fill the interval is the readings' spread
+        // alone, and misses.
         let mut narrow = config.clone();
         narrow.scan.interval_margin_deg = 0.0;
         narrow.scan.contact_edge_m = 0.0;
+        narrow.scan.fill_depth_m = 0.0;
         let (_, narrow) = analyze_scan(&scan, &narrow).unwrap();
         assert!(
             narrow.report.alpha_min_low_deg > truth.alpha_min_deg,
@@ -3512,6 +3596,39 @@ mod tests {
             narrow.report.alpha_min_low_deg,
             truth.alpha_min_deg
         );
+    }
+
+    /// Where the wall under the rock is its own (the usual 1.5 cm fill), reading the contact
+    /// above 4 cm finds the same contact: the `deep_fill` source does not widen the interval of a
+    /// scan whose profile runs straight to its contact.
+    #[test]
+    fn the_deep_fill_source_is_nil_under_a_shallow_fill() {
+        let (scan, _) = wedge_scan();
+        let (_, analysis) = analyze_scan(&scan, &FragilityConfig::default()).unwrap();
+        let deep_fill = analysis
+            .report
+            .alpha_interval
+            .sources
+            .iter()
+            .find(|s| s.name == "deep_fill")
+            .expect("a deep_fill source");
+        assert!(deep_fill.below_deg < 0.2, "{deep_fill:?}");
+    }
+
+    #[test]
+    fn fill_depth_counts_the_slabs_whose_tops_it_covers() {
+        let mut config = ScanConfig::default();
+        for (depth_m, slabs) in [
+            (0.0, 0),
+            (0.01, 0),
+            (0.015, 1),
+            (0.02, 1),
+            (0.04, 3),
+            (0.045, 4),
+        ] {
+            config.fill_depth_m = depth_m;
+            assert_eq!(fill_slab_count(&config), slabs, "{depth_m} m");
+        }
     }
 
     #[test]

@@ -11,7 +11,12 @@ For the shipped margin and each margin given, prints how often the truth falls i
 median width and the misses (truth outside: the run, the rock, the signed error and the side
 the interval missed by).
 
+With --reanalysed, the scans are those of `reanalyse_fragility.py`'s result files instead (the
+same meshes analysed by another build), so a change to the analysis and a margin are judged
+together.
+
 usage: margin_sweep.py CAMPAIGN_DIR... [--margins 1.5,1.25,1.0]
+       margin_sweep.py --reanalysed RESULT.json... [--margins 1.5,1.25,1.0]
 """
 import glob
 import json
@@ -57,6 +62,25 @@ def scans(dirs):
     return out
 
 
+def reanalysed_scans(paths):
+    """One row per distinct analysed mesh of `reanalyse_fragility.py` result files; runs are
+    named by their `runs/WORLD/seed-N` folder, so a run flown identically in two arms (the same
+    α) counts once."""
+    seen, out = set(), []
+    for path in paths:
+        for r in json.load(open(path)):
+            if 'alpha' not in r:
+                continue
+            run = r['run'].split('/runs/')[-1]
+            key = (run, r['rock'], round(r['alpha'], 6))
+            if key in seen:
+                continue
+            seen.add(key)
+            out.append({'label': f"{run} rock {r['rock']}", 'alpha': r['alpha'], 'truth': r['gt'],
+                        'low': r['low'], 'high': r['high'], 'sources': r['sources']})
+    return out
+
+
 def interval(scan, margin):
     """The scan's interval with the margin source set to `margin` degrees (None: as shipped)."""
     if margin is None:
@@ -91,16 +115,19 @@ def report(rows, margin):
 def main(argv):
     margins = [1.5, 1.25, 1.0, 0.75]
     dirs = []
+    reanalysed = False
     it = iter(argv)
     for a in it:
         if a == '--margins':
             margins = [float(x) for x in next(it).split(',')]
+        elif a == '--reanalysed':
+            reanalysed = True
         else:
             dirs.append(a)
     if not dirs:
         print(__doc__)
         return 2
-    rows = scans(dirs)
+    rows = reanalysed_scans(dirs) if reanalysed else scans(dirs)
     errors = [r['alpha'] - r['truth'] for r in rows]
     print(f"{len(rows)} distinct analysed scans; signed error median {statistics.median(errors):+.2f}°, "
           f"within 2° {sum(abs(e) <= 2 for e in errors)}")
