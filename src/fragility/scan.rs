@@ -2556,11 +2556,6 @@ fn analyze_in_support_frame(
                     .copied()
                     .collect();
                 let polygon = closed.landed_on(&contact, &rock, &com, h.gaps);
-                let rmax = |p: &[[f64; 3]]| {
-                    p.iter()
-                        .map(|q| (q[0] * q[0] + q[1] * q[1]).sqrt())
-                        .fold(0.0, f64::max)
-                };
                 first.alpha_min_on_contact(&polygon)
             })
             .min_by(f64::total_cmp);
