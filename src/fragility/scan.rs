@@ -934,6 +934,9 @@ pub enum ProfileModel {
 /// - the three worlds' 11 targets' exact surfaces: default rock 2 +1.12° → +0.17°.
 pub const MEDIAN_MODEL: ProfileModel = ProfileModel::BestFit;
 
+/// Slabs fitted per sector by the readings, in the ensemble's order.
+const ENSEMBLE_FITS: [usize; 3] = [3, 4, 6];
+
 /// The models of the readings, in the ensemble's order.
 const ENSEMBLE_MODELS: [ProfileModel; 3] = [
     ProfileModel::SquaredRadius,
@@ -983,7 +986,7 @@ impl ContactHypothesis {
         for &gaps in gap_readings {
             for model in ENSEMBLE_MODELS {
                 for skip_slabs in [0, 1] {
-                    for fit_slabs in [3, 4, 6] {
+                    for fit_slabs in ENSEMBLE_FITS {
                         for offset in [-plane_offset_m, 0.0, plane_offset_m] {
                             out.push(ContactHypothesis {
                                 model,
@@ -2537,9 +2540,9 @@ fn analyze_in_support_frame(
         // The lowest reading of the models and fits, each fitted above the deepest fill and
         // landing only on the surface above it: the surface under it may be the fill's wall,
         // which only widens the contact, so the source reaches below only.
-        let above_fill = ENSEMBLE_MODELS
+        let contacts: Vec<Vec<[f64; 3]>> = ENSEMBLE_MODELS
             .into_iter()
-            .flat_map(|model| [3, 4, 6].map(|fit_slabs| (model, fit_slabs)))
+            .flat_map(|model| ENSEMBLE_FITS.map(|fit_slabs| (model, fit_slabs)))
             .filter_map(|(model, fit_slabs)| {
                 let h = ContactHypothesis {
                     model,
@@ -2548,14 +2551,25 @@ fn analyze_in_support_frame(
                     plane_offset_m: 0.0,
                     gaps: OutlineGaps::Interpolated,
                 };
-                let contact = closed.contact_under(&h).ok()?;
-                let fill_top_z = contact.first()?[2] + config.scan.fill_depth_m;
-                let rock: Vec<Point3<f64>> = underside
+                closed.contact_under(&h).ok()
+            })
+            .collect();
+        // Every contact lies on the measured plane (offset 0), so one filter serves them all.
+        let rock: Vec<Point3<f64>> = contacts
+            .iter()
+            .find_map(|c| c.first())
+            .map(|p| p[2] + config.scan.fill_depth_m)
+            .map_or_else(Vec::new, |fill_top_z| {
+                underside
                     .iter()
                     .filter(|p| p.z > fill_top_z)
                     .copied()
-                    .collect();
-                let polygon = closed.landed_on(&contact, &rock, &com, h.gaps);
+                    .collect()
+            });
+        let above_fill = contacts
+            .iter()
+            .filter_map(|contact| {
+                let polygon = closed.landed_on(contact, &rock, &com, OutlineGaps::Interpolated);
                 first.alpha_min_on_contact(&polygon)
             })
             .min_by(f64::total_cmp);
@@ -3386,14 +3400,7 @@ mod tests {
         let (scan, _) = wedge_scan();
         let config = FragilityConfig::default();
         let unseen = |analysis: &FragilityAnalysis| {
-            let source = analysis
-                .report
-                .alpha_interval
-                .sources
-                .iter()
-                .find(|s| s.name == "unseen_shape")
-                .unwrap()
-                .clone();
+            let source = interval_source(&analysis.report, "unseen_shape");
             (source.below_deg, source.above_deg)
         };
         // Seen all round: only the cut is patched, and the shape adds nothing.
@@ -3560,12 +3567,7 @@ mod tests {
         assert_eq!(r.alpha_interval.source, "scan_contact");
         // Three models × two skips × three fits × three plane heights.
         assert_eq!(r.alpha_interval.contact_hypotheses, 54);
-        let deep_fill = r
-            .alpha_interval
-            .sources
-            .iter()
-            .find(|s| s.name == "deep_fill")
-            .expect("a deep_fill source");
+        let deep_fill = interval_source(r, "deep_fill");
         assert!(deep_fill.below_deg > 1.0, "{deep_fill:?}");
         assert_eq!(deep_fill.above_deg, 0.0);
         // Without the source, the 1° margin misses.
@@ -3600,13 +3602,7 @@ mod tests {
     fn the_deep_fill_source_is_nil_under_a_shallow_fill() {
         let (scan, _) = wedge_scan();
         let (_, analysis) = analyze_scan(&scan, &FragilityConfig::default()).unwrap();
-        let deep_fill = analysis
-            .report
-            .alpha_interval
-            .sources
-            .iter()
-            .find(|s| s.name == "deep_fill")
-            .expect("a deep_fill source");
+        let deep_fill = interval_source(&analysis.report, "deep_fill");
         assert!(deep_fill.below_deg < 0.2, "{deep_fill:?}");
     }
 
@@ -3624,6 +3620,19 @@ mod tests {
             config.fill_depth_m = depth_m;
             assert_eq!(fill_slab_count(&config), slabs, "{depth_m} m");
         }
+    }
+
+    /// The interval source `name` of `report`.
+    fn interval_source<'a>(
+        report: &'a crate::fragility::FragilityReport,
+        name: &str,
+    ) -> &'a IntervalSource {
+        report
+            .alpha_interval
+            .sources
+            .iter()
+            .find(|s| s.name == name)
+            .unwrap_or_else(|| panic!("no {name} source"))
     }
 
     #[test]
